@@ -1,0 +1,16 @@
+"""brainbulge: swelling brains and decompressive craniectomy by nonlinear finite elements.
+
+Reproduces Weickenmeier, Saez, Goriely, Kuhl, "Bulging brains", J. Elasticity 129 (2017)
+197-212: an elastically incompressible, swelling Mooney-Rivlin solid (mixed
+displacement-pressure formulation, ``J = Js`` enforced by a Lagrange multiplier) pressed
+against a rigid skull with an opening.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("brainbulge")
+except PackageNotFoundError:  # running from a source tree without installation
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]

@@ -1,0 +1,45 @@
+"""What every constitutive model provides: an isochoric energy ``psibar(F)``.
+
+The full mixed energy of MODEL.md section 2 is ``psi = psibar(F) + p (J - Js)``; the
+multiplier term is added by the solver (:mod:`brainbulge.solver.mixed`), the same for every
+material, so a material only knows its isochoric part. Stresses and tangents are obtained by
+symbolic differentiation of ``psibar`` (NGSolve ``Variation``): the energy is the single
+source of truth.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol, runtime_checkable
+
+import ngsolve as ngs
+import numpy as np
+
+from brainbulge.errors import InputError
+
+
+@runtime_checkable
+class Material(Protocol):
+    """An isochoric hyperelastic energy [kPa = kJ/m^3]."""
+
+    name: str
+
+    @property
+    def shear_modulus(self) -> float:
+        """Small-strain shear modulus ``mu`` [kPa]."""
+        ...
+
+    def psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
+        """Isochoric strain energy density ``psibar(F)`` [kPa] of a 3x3 ``F``."""
+        ...
+
+    def psi_iso_numpy(self, F: np.ndarray) -> np.ndarray:
+        """The same energy for an array of 3x3 ``F`` (shape ``(..., 3, 3)``) [kPa]."""
+        ...
+
+
+def check_finite(label: str, *values: float) -> None:
+    """Reject NaN and infinite parameters with a one-line message."""
+    for v in values:
+        if not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise InputError(f"{label}: parameter {v!r} is not a finite number; give real values")
