@@ -47,8 +47,7 @@ class MooneyRivlin:
         return self.c1 + self.c2
 
     def psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
-        I1bar, I2bar, _ = isochoric_invariants(F)
-        return self.c1 / 2 * (I1bar - 3) + self.c2 / 2 * (I2bar - 3)
+        return mooney_rivlin_psi(F, self.c1, self.c2)
 
     def psi_iso_numpy(self, F: np.ndarray) -> np.ndarray:
         I1bar, I2bar, _ = isochoric_invariants_numpy(F)
@@ -69,6 +68,16 @@ class MooneyRivlin:
             - self.c2 * bbar @ bbar
             - scal[..., None, None] * eye
         )
+
+
+def mooney_rivlin_psi(
+    F: ngs.CoefficientFunction,
+    c1: float | ngs.CoefficientFunction,
+    c2: float | ngs.CoefficientFunction,
+) -> ngs.CoefficientFunction:
+    """``psibar = c1/2 (I1bar - 3) + c2/2 (I2bar - 3)`` [kPa]; coefficients may vary in space."""
+    I1bar, I2bar, _ = isochoric_invariants(F)
+    return c1 / 2 * (I1bar - 3) + c2 / 2 * (I2bar - 3)
 
 
 def neo_hookean(c1: float, name: str = "neo-hookean") -> MooneyRivlin:

@@ -1,0 +1,98 @@
+"""A swelling problem on a mesh: what is solved, independent of how.
+
+Regions of the mesh (NGSolve material names) map to materials and to a target swelling ``Js``
+[-]. Boundaries (NGSolve boundary names, regular expressions allowed) are clamped, clamped per
+component (symmetry planes), in frictionless contact with a rigid obstacle, or traction-free
+(everything else).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import ngsolve as ngs
+
+from brainbulge.errors import InputError
+from brainbulge.materials.base import Material
+
+
+class Obstacle(Protocol):
+    """A rigid body described by its signed distance ``g(x)`` [length].
+
+    ``g > 0`` outside the rigid body (admissible), ``g < 0`` inside it (penetration).
+    """
+
+    def gap(self, x: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
+        """Signed distance at the (deformed) position ``x``, differentiable in ``x``."""
+        ...
+
+
+@dataclass
+class Contact:
+    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``."""
+
+    boundary: str
+    obstacle: Obstacle
+
+
+@dataclass
+class Problem:
+    """Everything that defines a swelling solve.
+
+    Attributes:
+        mesh: NGSolve mesh, 2D (plane strain) or 3D, lengths in the user's unit.
+        materials: region name -> material; a region absent here is an error.
+        swelling: region name -> target ``Js`` (>0; default 1 for unnamed regions).
+        clamped: regex of boundaries where ``u = 0``.
+        clamped_components: component index -> regex of boundaries where ``u_i = 0``.
+        contacts: frictionless contact conditions.
+        displacements: boundary regex -> displacement at full load per component (``None``
+            leaves a component free), ramped with the load factor like ``Js`` [length].
+    """
+
+    mesh: ngs.Mesh
+    materials: dict[str, Material]
+    swelling: dict[str, float] = field(default_factory=dict)
+    clamped: str = ""
+    clamped_components: dict[int, str] = field(default_factory=dict)
+    contacts: list[Contact] = field(default_factory=list)
+    displacements: dict[str, tuple[float | None, ...]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        regions = set(self.mesh.GetMaterials())
+        missing = regions - set(self.materials)
+        if missing:
+            raise InputError(
+                f"no material for mesh region(s) {', '.join(sorted(missing))}; "
+                "assign one to every region"
+            )
+        for region, Js in self.swelling.items():
+            if region not in regions:
+                raise InputError(f"swelling given for unknown region {region!r}")
+            if not isinstance(Js, (int, float)) or not math.isfinite(Js) or Js <= 0:
+                raise InputError(
+                    f"swelling Js = {Js!r} in region {region!r} must be a positive number"
+                )
+
+    @property
+    def dim(self) -> int:
+        return self.mesh.dim
+
+    def swelling_cf(self) -> ngs.CoefficientFunction:
+        """Piecewise-constant target swelling ``Js(X)`` [-]."""
+        values = {r: float(self.swelling.get(r, 1.0)) for r in self.mesh.GetMaterials()}
+        return self.mesh.MaterialCF(values, default=1.0)
+
+    def boundary_names(self) -> list[str]:
+        return sorted(set(self.mesh.GetBoundaries()))
+
+    def traction_free_boundaries(self) -> list[str]:
+        """Boundaries that are neither clamped (fully or per component) nor in contact."""
+        taken = [self.clamped, *self.clamped_components.values()]
+        taken += [c.boundary for c in self.contacts]
+        taken += list(self.displacements)
+        pats = [re.compile(f"^(?:{p})$") for p in taken if p]
+        return [b for b in self.boundary_names() if not any(p.match(b) for p in pats)]

@@ -1,0 +1,196 @@
+"""Mixed displacement-pressure formulation of the swelling, incompressible solid.
+
+Stationary point of the Lagrangian (MODEL.md section 2) over ``(u, p)``::
+
+    Pi(u, p) = int_Omega [ psibar(F) + p (J - Js(t)) ] dV
+             + sum_contacts int_Gamma_c 1/(2 r) <lambda - r g(X + u)>_+^2 dA
+
+with ``Js(t) = 1 + t (Js - 1)`` the swelling ramped by the load factor ``t`` in [0, 1]. ``p``
+is the Lagrange multiplier of ``J = Js`` (tension positive). Contact is frictionless and
+unilateral against rigid obstacles with signed distance ``g`` (``g >= 0`` admissible), by an
+augmented Lagrangian: ``r`` is the penalty, ``lambda >= 0`` the contact pressure, updated by
+Uzawa's rule ``lambda <- <lambda - r g>_+`` until the penetration is below tolerance.
+
+NGSolve's ``Variation`` differentiates ``Pi`` symbolically: residual and tangent come exactly
+from the energy. Inf-sup stable pairs: Taylor-Hood P2/P1 (2D and 3D) and MINI, P1 + bubble /
+P1, with the bubbles condensed statically.
+"""
+
+from __future__ import annotations
+
+import re
+
+import ngsolve as ngs
+
+from brainbulge.errors import InputError
+from brainbulge.materials.kinematics import deformation_gradient
+from brainbulge.materials.mooney_rivlin import MooneyRivlin, mooney_rivlin_psi
+from brainbulge.model.problem import Problem
+
+ELEMENTS = ("taylor-hood", "mini")
+
+
+class MixedForm:
+    """Spaces, unknowns and the symbolic energy of a :class:`Problem`."""
+
+    def __init__(
+        self,
+        problem: Problem,
+        element: str = "taylor-hood",
+        contact_penalty: float | None = None,
+        compile_energy: bool = False,
+    ) -> None:
+        if element not in ELEMENTS:
+            raise InputError(f"unknown element {element!r}; choose one of {', '.join(ELEMENTS)}")
+        self.problem = problem
+        self.element = element
+        mesh = problem.mesh
+        self.mesh = mesh
+        dim = mesh.dim
+        self.dim = dim
+
+        comp_flags = {}
+        for i, name in enumerate("xyz"[:dim]):
+            pats = [p for p in (problem.clamped, problem.clamped_components.get(i, "")) if p]
+            pats += [b for b, d in problem.displacements.items() if d[i] is not None]
+            if pats:
+                comp_flags[f"dirichlet{name}"] = "|".join(pats)
+        V = ngs.VectorH1(mesh, order=2 if element == "taylor-hood" else 1, **comp_flags)
+        if element == "mini":
+            V.SetOrder(ngs.TRIG if dim == 2 else ngs.TET, 3 if dim == 2 else 4)
+            V.Update()
+        # pressure: continuous P1 within each zone of equal material and swelling, broken
+        # across zones, where the exact pressure jumps (a continuous p smears the jump and
+        # spoils J = Js next to swelling interfaces)
+        self.pressure_zones = _pressure_zones(problem)
+        Qs = [ngs.H1(mesh, order=1, definedon=mesh.Materials(z)) for z in self.pressure_zones]
+        self.fes = ngs.FESpace([V, *Qs])
+        self.condense = element == "mini"
+        self.load = ngs.Parameter(0.0)  # load factor t
+        self.gfu = ngs.GridFunction(self.fes)
+
+        u, *ps = self.fes.TrialFunction()
+        p = sum(ps[1:], ps[0])
+        F = deformation_gradient(u, dim)
+        J = ngs.Det(F)
+        self.Js = problem.swelling_cf()
+        Js_t = 1 + self.load * (self.Js - 1)
+        W = self._psi_iso(F) + p * (J - Js_t)
+        if compile_energy:
+            W = W.Compile(realcompile=True, wait=True)
+        self.a = ngs.BilinearForm(self.fes, symmetric=True, condense=self.condense)
+        self.a += ngs.Variation(W * ngs.dx)
+
+        # contact: augmented Lagrangian with a multiplier field on each contact boundary
+        self.mu_max = max(m.shear_modulus for m in problem.materials.values())
+        self.contact_multipliers: list[ngs.GridFunction] = []
+        self.contact_gaps: list[ngs.CoefficientFunction] = []
+        self.contact_regions: list[ngs.Region] = []
+        self.contact_masks: list[ngs.CoefficientFunction] = []
+        h = _mesh_size(mesh)
+        self.r = contact_penalty if contact_penalty is not None else 100 * self.mu_max / h
+        X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
+        for c in problem.contacts:
+            region = mesh.Boundaries(c.boundary)
+            if not any(region.Mask()):
+                raise InputError(f"contact boundary {c.boundary!r} matches no mesh boundary")
+            L = ngs.H1(mesh, order=2, definedon=region)
+            lam = ngs.GridFunction(L)
+            g = c.obstacle.gap(X + u)
+            z = lam - self.r * g
+            Wc = 1 / (2 * self.r) * ngs.IfPos(z, z * z, 0)
+            self.a += ngs.Variation(Wc * ngs.ds(definedon=region))
+            self.contact_multipliers.append(lam)
+            self.contact_regions.append(region)
+            self.contact_masks.append(boundary_indicator(mesh, c.boundary))
+            u_gf = self.gfu.components[0]
+            self.contact_gaps.append(c.obstacle.gap(X + u_gf))
+
+    def _psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
+        """Isochoric energy over all regions: one expression with region-wise coefficients."""
+        mats = self.problem.materials
+        mesh = self.mesh
+        if all(isinstance(m, MooneyRivlin) for m in mats.values()):
+            c1 = mesh.MaterialCF({r: m.c1 for r, m in mats.items()}, default=0)
+            c2 = mesh.MaterialCF({r: m.c2 for r, m in mats.items()}, default=0)
+            return mooney_rivlin_psi(F, c1, c2)
+        psi = 0
+        for region, m in mats.items():
+            mask = mesh.MaterialCF({region: 1.0}, default=0.0)
+            psi = psi + mask * m.psi_iso(F)
+        return psi
+
+    # --- fields of the current state -------------------------------------------------
+    @property
+    def u(self) -> ngs.GridFunction:
+        return self.gfu.components[0]
+
+    @property
+    def p(self) -> ngs.CoefficientFunction:
+        """Pressure multiplier ``p`` (tension positive) [kPa]."""
+        comps = self.gfu.components[1:]
+        return sum(comps[1:], comps[0])
+
+    def F(self) -> ngs.CoefficientFunction:
+        return deformation_gradient(self.u, self.dim)
+
+    def set_load(self, t: float) -> None:
+        """Set the load factor ``t`` and the prescribed boundary displacements ``t u_D``."""
+        self.load.Set(t)
+        for boundary, values in self.problem.displacements.items():
+            region = self.mesh.Boundaries(boundary)
+            for i, v in enumerate(values):
+                if v is not None:
+                    self.u.components[i].Set(t * v, ngs.BND, definedon=region)
+
+    def Js_current(self) -> ngs.CoefficientFunction:
+        return 1 + self.load * (self.Js - 1)
+
+    def update_contact_multipliers(self) -> None:
+        """Uzawa update ``lambda <- <lambda - r g>_+`` on each contact boundary."""
+        for lam, g, region in zip(
+            self.contact_multipliers, self.contact_gaps, self.contact_regions, strict=True
+        ):
+            z = lam - self.r * g
+            lam.Set(ngs.IfPos(z, z, 0), ngs.BND, definedon=region)
+
+    def contact_pressure(self) -> ngs.CoefficientFunction:
+        """Current contact pressure ``<lambda - r g>_+`` [kPa] (zero off contact)."""
+        total = ngs.CF(0)
+        for lam, g, mask in zip(
+            self.contact_multipliers, self.contact_gaps, self.contact_masks, strict=True
+        ):
+            z = lam - self.r * g
+            total = total + ngs.IfPos(z, z, 0) * mask
+        return total
+
+    def gap(self) -> ngs.CoefficientFunction:
+        """Signed distance to the obstacle on contact boundaries (large elsewhere) [length]."""
+        total = ngs.CF(0)
+        for g, mask in zip(self.contact_gaps, self.contact_masks, strict=True):
+            total = total + ngs.IfPos(mask - 0.5, g, 0)
+        return total
+
+
+def boundary_indicator(mesh: ngs.Mesh, pattern: str) -> ngs.CoefficientFunction:
+    """1 on boundaries whose name matches the regex ``pattern``, 0 elsewhere."""
+    import re
+
+    rx = re.compile(f"^(?:{pattern})$")
+    names = {b for b in mesh.GetBoundaries() if rx.match(b)}
+    return mesh.BoundaryCF({b: 1.0 for b in names}, default=0.0)
+
+
+def _pressure_zones(problem: Problem) -> list[str]:
+    """Regex per group of regions with the same material and target swelling."""
+    groups: dict[tuple, list[str]] = {}
+    for region in sorted(set(problem.mesh.GetMaterials())):
+        key = (repr(problem.materials[region]), float(problem.swelling.get(region, 1.0)))
+        groups.setdefault(key, []).append(region)
+    return ["|".join(re.escape(r) for r in regions) for regions in groups.values()]
+
+
+def _mesh_size(mesh: ngs.Mesh) -> float:
+    """A typical element size [length]: (volume / elements)^(1/dim) times a shape factor."""
+    vol = ngs.Integrate(ngs.CF(1), mesh)
+    return float((vol / mesh.ne) ** (1 / mesh.dim)) * (1.5 if mesh.dim == 2 else 2.0)

@@ -1,0 +1,304 @@
+"""Newton's method with a line search, and load stepping on the swelling ``Js``.
+
+Each load step raises the load factor ``t`` (``Js(t) = 1 + t (Js - 1)``), predicts the new
+state by extrapolating the last increment, and solves the mixed equations by Newton's method:
+``K(x_k) dx = R(x_k)``, ``x_{k+1} = x_k - s dx`` with a backtracking line search on the scaled
+residual norm. A step that fails (divergence, non-finite values from inverted elements, too
+many iterations) is cut in half and retried from the last converged state; the solve stops with
+a clear message when the step would fall below ``min_step``. Contact multipliers are
+augmented (Uzawa) after each converged step until the penetration is below tolerance.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import ngsolve as ngs
+import numpy as np
+import scipy.sparse as sp
+from tqdm.auto import tqdm
+
+from brainbulge.errors import ConvergenceError, InfeasibleError, InputError
+from brainbulge.model.problem import Problem
+from brainbulge.solver.linear import LinearSolver, make_linear_solver
+from brainbulge.solver.mixed import MixedForm
+
+log = logging.getLogger("brainbulge")
+
+
+@dataclass
+class SolverOptions:
+    """Load stepping and Newton controls.
+
+    Attributes:
+        steps: initial number of equal load steps from ``Js = 1`` to the target.
+        min_step: smallest load increment before giving up [-].
+        max_step: largest load increment after growth [-].
+        max_iterations: Newton iterations per attempt.
+        tolerance: on the scaled residual (force / (mu L^(d-1)), volume / |Omega|).
+        penetration_tol: contact penetration tolerance relative to the body size [-].
+        max_augmentations: Uzawa updates per load step.
+        linear_solver: "pardiso" or "scipy".
+        progress: show a progress bar over the load.
+    """
+
+    steps: int = 5
+    min_step: float = 1e-3
+    max_step: float = 1.0
+    max_iterations: int = 20
+    tolerance: float = 1e-9
+    penetration_tol: float = 1e-5
+    max_augmentations: int = 8
+    linear_solver: str = "pardiso"
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.steps, int) or self.steps < 1:
+            raise InputError(f"steps = {self.steps!r} must be a positive integer")
+        if not (0 < self.min_step <= 1):
+            raise InputError(f"min_step = {self.min_step!r} must lie in (0, 1]")
+
+
+@dataclass
+class StepRecord:
+    """One accepted load step."""
+
+    load: float
+    newton_iterations: int
+    augmentations: int
+    residual: float
+    max_penetration: float
+
+
+@dataclass
+class Solution:
+    """The last converged state, and how it was reached."""
+
+    form: MixedForm
+    load: float
+    converged: bool
+    steps: list[StepRecord] = field(default_factory=list)
+    rejected_steps: int = 0
+    message: str = ""
+    wall_time_s: float = 0.0
+    assembly_time_s: float = 0.0
+    solve_time_s: float = 0.0
+
+    @property
+    def newton_iterations(self) -> int:
+        return sum(s.newton_iterations for s in self.steps)
+
+    def raise_if_failed(self) -> None:
+        if not self.converged:
+            raise ConvergenceError(self.message)
+
+
+class NewtonSolver:
+    """Newton + load stepping for a :class:`MixedForm`."""
+
+    def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
+        self.form = form
+        self.opt = options or SolverOptions()
+        self.linear: LinearSolver = make_linear_solver(self.opt.linear_solver)
+        fes = form.fes
+        self.free = np.flatnonzero(np.array(list(fes.FreeDofs(form.condense)), dtype=bool))
+        is_u = np.zeros(fes.ndof, dtype=bool)
+        r = fes.Range(0)
+        is_u[r.start : r.stop] = True
+        self.is_u_free = is_u[self.free]
+        mesh = form.mesh
+        self.volume = float(ngs.Integrate(ngs.CF(1), mesh))
+        self.length = self.volume ** (1 / mesh.dim)
+        self.force_scale = form.mu_max * self.length ** (mesh.dim - 1)
+        self.res = form.gfu.vec.CreateVector()
+        self.t_assembly = 0.0
+        self.t_solve = 0.0
+        self.history: list[list[float]] = []  # scaled residual norms of each Newton solve
+
+    # --- residual and tangent ----------------------------------------------------------
+    def residual(self, x: ngs.BaseVector) -> np.ndarray:
+        t0 = time.perf_counter()
+        self.form.a.Apply(x, self.res)
+        self.t_assembly += time.perf_counter() - t0
+        return self.res.FV().NumPy().copy()
+
+    def scaled_norm(self, r: np.ndarray) -> float:
+        """Residual norm with forces and volumes made dimensionless."""
+        rf = r[self.free]
+        ru = np.linalg.norm(rf[self.is_u_free]) / self.force_scale
+        rp = np.linalg.norm(rf[~self.is_u_free]) / self.volume
+        val = float(np.hypot(ru, rp))
+        return val if np.isfinite(val) else np.inf
+
+    def tangent(self, x: ngs.BaseVector) -> sp.csr_matrix:
+        """The assembled (condensed) tangent restricted to the free DOFs."""
+        t0 = time.perf_counter()
+        self.form.a.AssembleLinearization(x)
+        K = sp.csr_matrix(self.form.a.mat.CSR())
+        self.t_assembly += time.perf_counter() - t0
+        return K[self.free][:, self.free]
+
+    def newton_direction(self, x: ngs.BaseVector) -> ngs.BaseVector:
+        """``dx`` with ``K(x) dx = R(x)`` (bubbles condensed and recovered for MINI)."""
+        K = self.tangent(x)
+        a = self.form.a
+        rhs = x.CreateVector()
+        a.Apply(x, rhs)
+        if self.form.condense:
+            rhs.data += a.harmonic_extension_trans * rhs
+        t0 = time.perf_counter()
+        dx = x.CreateVector()
+        dx[:] = 0
+        sol = self.linear.solve(K, rhs.FV().NumPy()[self.free])
+        self.t_solve += time.perf_counter() - t0
+        dx.FV().NumPy()[self.free] = sol
+        if self.form.condense:
+            dx.data += a.harmonic_extension * dx
+            dx.data += a.inner_solve * rhs
+        return dx
+
+    def newton(self, x: ngs.BaseVector) -> tuple[bool, int, float]:
+        """Solve at the current load from the guess ``x`` (updated in place)."""
+        norm = self.scaled_norm(self.residual(x))
+        self.history.append([])
+        for it in range(self.opt.max_iterations + 1):
+            self.history[-1].append(norm)
+            log.debug("    newton %d: |R| = %.3e", it, norm)
+            if norm <= self.opt.tolerance:
+                return True, it, norm
+            if not np.isfinite(norm) or it == self.opt.max_iterations:
+                return False, it, norm
+            try:
+                dx = self.newton_direction(x)
+            except ConvergenceError:
+                return False, it, norm
+            x0 = x.CreateVector()
+            x0.data = x
+            s = 1.0
+            while True:
+                x.data = x0 - s * dx
+                trial = self.scaled_norm(self.residual(x))
+                if trial < (1 - 1e-4 * s) * norm or trial <= self.opt.tolerance:
+                    norm = trial
+                    break
+                s *= 0.5
+                if s < 1 / 64:
+                    x.data = x0
+                    return False, it, norm
+        return False, self.opt.max_iterations, norm
+
+    # --- contact -----------------------------------------------------------------------
+    def max_penetration(self) -> float:
+        """Largest penetration ``max(-g, 0)`` at boundary integration points [length]."""
+        if not self.form.contact_gaps:
+            return 0.0
+        from brainbulge.results.quadrature import quadrature_points
+
+        q = quadrature_points(self.form.mesh, order=4, boundary=True)
+        pen = 0.0
+        for g, mask in zip(self.form.contact_gaps, self.form.contact_masks, strict=True):
+            on = q(mask) > 0.5
+            if on.any():
+                pen = max(pen, float(np.max(-q(g)[on])))
+        return max(pen, 0.0)
+
+    # --- load stepping -----------------------------------------------------------------
+    def check_feasible(self) -> None:
+        """A body with no traction-free boundary cannot swell (the skull is rigid)."""
+        problem = self.form.problem
+        if problem.traction_free_boundaries():
+            return
+        added = float(ngs.Integrate(self.form.Js - 1, problem.mesh))
+        if added > 1e-12 * self.volume:
+            raise InfeasibleError(
+                f"infeasible: swelling adds {added:.4g} (volume units) but every boundary is "
+                "clamped or against the rigid skull, a closed domain; open part of the "
+                "boundary (a craniectomy opening)"
+            )
+
+    def solve(self) -> Solution:
+        """Ramp the load from 0 to 1; return the last converged state."""
+        self.check_feasible()
+        form, opt = self.form, self.opt
+        start = time.perf_counter()
+        x = form.gfu.vec
+        sol = Solution(form=form, load=0.0, converged=False)
+        t, dt = 0.0, 1.0 / opt.steps
+        x_prev = x.CreateVector()
+        x_prev.data = x
+        last_increment: ngs.BaseVector | None = None
+        last_dt = 0.0
+        pen_tol = opt.penetration_tol * self.length
+        bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
+        try:
+            while t < 1 - 1e-12:
+                dt = min(dt, 1 - t, opt.max_step)
+                form.set_load(t + dt)
+                lam_saved = [lam.vec.FV().NumPy().copy() for lam in form.contact_multipliers]
+                if last_increment is not None:  # predictor: extrapolate the last increment
+                    x.data = x_prev + (dt / last_dt) * last_increment
+                    form.set_load(t + dt)  # exact prescribed values over the predictor
+                ok, its, norm = self.newton(x)
+                if not ok and last_increment is not None:  # retry without the predictor
+                    x.data = x_prev
+                    ok, its2, norm = self.newton(x)
+                    its += its2
+                n_aug, pen = 0, 0.0
+                if ok and form.contact_multipliers:
+                    pen = self.max_penetration()
+                    while ok and pen > pen_tol and n_aug < opt.max_augmentations:
+                        form.update_contact_multipliers()
+                        ok, its2, norm = self.newton(x)
+                        its += its2
+                        n_aug += 1
+                        pen = self.max_penetration()
+                if not ok:
+                    sol.rejected_steps += 1
+                    x.data = x_prev
+                    for lam, saved in zip(form.contact_multipliers, lam_saved, strict=True):
+                        lam.vec.FV().NumPy()[:] = saved
+                    log.info("  load %.4f: not converged (|R| = %.2e), cutting step", t + dt, norm)
+                    dt *= 0.5
+                    if dt < opt.min_step:
+                        sol.message = (
+                            f"Newton diverged at load {t + 2 * dt:.4f} of 1 (swelling "
+                            f"ramp) even with a load step of {2 * dt:.2g}; the last converged "
+                            f"state (load {t:.4f}) is kept. Try more --steps, a finer mesh, "
+                            "or check the boundary conditions"
+                        )
+                        break
+                    continue
+                increment = x.CreateVector()
+                increment.data = x - x_prev
+                last_increment, last_dt = increment, dt
+                x_prev.data = x
+                t += dt
+                bar.update(round(100 * t) - bar.n)
+                sol.steps.append(StepRecord(t, its, n_aug, norm, pen))
+                log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, norm)
+                if its <= 4:
+                    dt *= 1.5
+            else:
+                sol.converged = True
+        finally:
+            bar.close()
+            x.data = x_prev
+            form.load.Set(t)
+        sol.load = t
+        sol.wall_time_s = time.perf_counter() - start
+        sol.assembly_time_s = self.t_assembly
+        sol.solve_time_s = self.t_solve
+        return sol
+
+
+def solve(
+    problem: Problem,
+    element: str = "taylor-hood",
+    options: SolverOptions | None = None,
+    compile_energy: bool = False,
+) -> Solution:
+    """Build the mixed form of ``problem`` and ramp the swelling to its target."""
+    form = MixedForm(problem, element=element, compile_energy=compile_energy)
+    return NewtonSolver(form, options).solve()

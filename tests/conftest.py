@@ -1,0 +1,38 @@
+"""Shared fixtures: small meshes that make tests fast but able to fail."""
+
+from __future__ import annotations
+
+import ngsolve as ngs
+import pytest
+from netgen.occ import X, Y, Z, Box, OCCGeometry, Rectangle
+
+
+def unit_box_mesh(dim: int, h: float = 0.35) -> ngs.Mesh:
+    """Unit square/cube, one region ``tissue``; boundaries ``xmin ymin zmin xmax``, rest
+    ``free``."""
+    if dim == 3:
+        shape = Box((0, 0, 0), (1, 1, 1))
+        shape.faces.name = "free"
+        shape.faces.Min(X).name = "xmin"
+        shape.faces.Min(Y).name = "ymin"
+        shape.faces.Min(Z).name = "zmin"
+        shape.faces.Max(X).name = "xmax"
+        shape.mat("tissue")
+    else:
+        shape = Rectangle(1, 1).Face()
+        shape.edges.name = "free"
+        shape.edges.Min(X).name = "xmin"
+        shape.edges.Min(Y).name = "ymin"
+        shape.edges.Max(X).name = "xmax"
+        shape.faces.name = "tissue"
+    return ngs.Mesh(OCCGeometry(shape, dim=dim).GenerateMesh(maxh=h))
+
+
+@pytest.fixture(scope="session")
+def box2d() -> ngs.Mesh:
+    return unit_box_mesh(2)
+
+
+@pytest.fixture(scope="session")
+def box3d() -> ngs.Mesh:
+    return unit_box_mesh(3)

@@ -1,0 +1,147 @@
+"""Homogeneous states with closed-form answers (MODEL.md section 7)."""
+
+from __future__ import annotations
+
+import ngsolve as ngs
+import numpy as np
+import pytest
+
+from brainbulge.errors import InfeasibleError
+from brainbulge.materials import MooneyRivlin, Ogden
+from brainbulge.model import Problem
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions, solve
+
+GRAY = MooneyRivlin(0.28, 333.0)
+SYMMETRY = {0: "xmin", 1: "ymin", 2: "zmin"}
+
+
+def _l2_error(mesh: ngs.Mesh, a: ngs.CoefficientFunction, b: ngs.CoefficientFunction) -> float:
+    return float(np.sqrt(ngs.Integrate(ngs.InnerProduct(a - b, a - b), mesh)))
+
+
+@pytest.mark.parametrize("element", ["taylor-hood", "mini"])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_free_swelling_is_uniform_and_stress_free(dim, element, box2d, box3d) -> None:
+    """Uniform Js, only rigid motion suppressed (symmetry planes): ``u = (Js^(1/d) - 1) X``;
+    zero stress in 3D, zero in-plane stress in plane strain (F33 = 1)."""
+    mesh = box2d if dim == 2 else box3d
+    Js = 1.3
+    problem = Problem(mesh, {"tissue": GRAY}, {"tissue": Js}, clamped_components=SYMMETRY)
+    sol = solve(problem, element, SolverOptions(steps=2))
+    assert sol.converged and sol.load == 1.0
+    X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
+    assert _l2_error(mesh, sol.form.u, (Js ** (1 / dim) - 1) * X) < 1e-8
+    # stress from the closed form at a point, with the solver's p
+    F = np.eye(3)
+    F[:dim, :dim] *= Js ** (1 / dim)
+    p = sol.form.p(mesh(0.4, 0.3, 0.2) if dim == 3 else mesh(0.4, 0.3))
+    tau = GRAY.kirchhoff_stress(F, p)
+    assert np.abs(tau[:dim, :dim]).max() < 1e-7 * GRAY.shear_modulus
+    if dim == 3:
+        assert abs(p) < 1e-7 * GRAY.shear_modulus
+    else:  # plane strain: the out-of-plane stress holds F33 = 1
+        assert abs(tau[2, 2]) > 1e-3 * GRAY.shear_modulus
+
+
+def test_free_swelling_independent_of_stiffness_scale(box3d) -> None:
+    """With swelling as the only load, the deformation depends on c1/c2, not on the scale."""
+    Js = {"tissue": 1.2}
+    mats = [MooneyRivlin(0.28, 333.0), MooneyRivlin(0.00028, 0.333)]
+    us = []
+    for m in mats:
+        sol = solve(Problem(box3d, {"tissue": m}, Js, clamped_components=SYMMETRY))
+        us.append(sol.form.u(box3d(0.9, 0.8, 0.7)))
+    np.testing.assert_allclose(us[0], us[1], rtol=1e-8)
+
+
+@pytest.mark.parametrize("dim", [3])
+@pytest.mark.parametrize(
+    "material,nominal",
+    [
+        (GRAY, lambda lam: (lam - lam**-2) * (GRAY.c1 + GRAY.c2 / lam)),
+        (
+            Ogden(c=(2.0,), alpha=(5.0,)),
+            lambda lam: 2.0 * (lam**4.0 - lam ** (-2.5 - 1)),
+        ),
+    ],
+    ids=["mooney-rivlin", "ogden"],
+)
+def test_uniaxial_incompressible_bar(dim, material, nominal) -> None:
+    """Nominal stress of a homogeneous uniaxial stretch: ``P = (lam - lam^-2)(c1 + c2/lam)``
+    for Mooney-Rivlin; ``P = sum c_i (lam^(a_i - 1) - lam^(-a_i/2 - 1))`` for Ogden."""
+    from conftest import unit_box_mesh
+
+    box3d = unit_box_mesh(3, h=1.0)  # homogeneous: a coarse mesh is exact
+    lam = 1.4
+    problem = Problem(
+        box3d,
+        {"tissue": material},
+        clamped_components=SYMMETRY,
+        displacements={"xmax": (lam - 1.0, None, None)},
+    )
+    form = MixedForm(problem)
+    solver = NewtonSolver(form, SolverOptions(steps=4))
+    sol = solver.solve()
+    assert sol.converged
+    # reaction on xmax = residual paired with a unit x-displacement of that face
+    w = ngs.GridFunction(form.fes)
+    w.components[0].Set(ngs.CF((1, 0, 0)), ngs.BND, definedon=box3d.Boundaries("xmax"))
+    r = form.gfu.vec.CreateVector()
+    form.a.Apply(form.gfu.vec, r)
+    reaction = ngs.InnerProduct(r, w.vec)  # reference area is 1
+    assert reaction == pytest.approx(nominal(lam), rel=1e-6)
+    # lateral contraction lam^(-1/2)
+    assert 1 + form.u(box3d(1.0, 1.0, 1.0))[1] == pytest.approx(lam**-0.5, rel=1e-8)
+
+
+def test_tangent_matches_finite_differences(box2d) -> None:
+    """The assembled tangent equals the central difference of the residual."""
+    problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.3}, clamped_components=SYMMETRY)
+    form = MixedForm(problem)
+    form.set_load(0.7)
+    solver = NewtonSolver(form)
+    rng = np.random.default_rng(0)
+    x = form.gfu.vec
+    x.FV().NumPy()[:] = 0.02 * rng.standard_normal(len(x))
+    K = solver.tangent(x)
+    v = np.zeros(len(x))
+    v[solver.free] = rng.standard_normal(len(solver.free))
+    eps = 1e-6
+    xp, xm = x.CreateVector(), x.CreateVector()
+    xp.FV().NumPy()[:] = x.FV().NumPy() + eps * v
+    xm.FV().NumPy()[:] = x.FV().NumPy() - eps * v
+    fd = (solver.residual(xp) - solver.residual(xm))[solver.free] / (2 * eps)
+    Kv = K @ v[solver.free]
+    assert np.linalg.norm(Kv - fd) < 1e-6 * np.linalg.norm(Kv)
+
+
+def test_newton_converges_quadratically() -> None:
+    from brainbulge.geometry.inclusion import inclusion_mesh
+
+    mesh = inclusion_mesh(2, A=0.3, h=0.15)
+    problem = Problem(
+        mesh,
+        {"inclusion": GRAY, "matrix": GRAY},
+        {"inclusion": 1.3},
+        clamped_components={0: "sym_x", 1: "sym_y"},
+    )
+    form = MixedForm(problem)
+    solver = NewtonSolver(form, SolverOptions(steps=1, tolerance=1e-13))
+    assert solver.solve().converged
+    hist = [h for h in solver.history[0] if h > 1e-12]
+    assert len(hist) >= 4
+    # quadratic: log r_{k+1} / log r_k approaches 2 in the last iterations
+    rates = [np.log(hist[k + 1]) / np.log(hist[k]) for k in range(len(hist) - 1) if hist[k] < 0.1]
+    assert max(rates) > 1.7, hist
+
+
+def test_closed_domain_is_infeasible(box2d) -> None:
+    """Swelling with every boundary clamped: a clear error, not a hang."""
+    problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.2}, clamped="xmin|ymin|xmax|free")
+    with pytest.raises(InfeasibleError, match="closed domain"):
+        solve(problem)
+
+
+def test_closed_domain_without_swelling_is_fine(box2d) -> None:
+    problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.0}, clamped="xmin|ymin|xmax|free")
+    assert solve(problem).converged
