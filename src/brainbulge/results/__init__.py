@@ -1,0 +1,1 @@
+"""Post-processing: kinematic fields, clinical metrics, summaries, files and figures."""

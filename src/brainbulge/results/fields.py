@@ -1,0 +1,105 @@
+"""Output fields of MODEL.md section 3, computed from samples of the solution.
+
+At any set of points (integration points for summaries, element vertices for files and
+figures) the solution is sampled as ``X``, ``u``, ``Grad u``, ``p``, ``Js``; everything else is
+NumPy:
+
+- ``J = det F``, elastic ``Je = J / Js``, swelling ``Js``;
+- maximum principal Green-Lagrange strain, the largest eigenvalue of ``E = (C - I)/2``;
+- radial ("axonal") stretch ``lambda_n = sqrt(n . C n)`` with ``n`` the unit reference fibre
+  direction (radial from a centre by default);
+- tangential ("shear") stretch ``lambda_t``: in 2D ``sqrt(t . C t)`` with ``t`` perpendicular to
+  ``n`` in the plane; in 3D the largest stretch within the plane normal to ``n``, i.e. the
+  square root of the largest eigenvalue of ``C`` restricted to that plane;
+- pressure ``-p`` [kPa], positive in compression (``p`` is tension-positive in the solver).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import ngsolve as ngs
+import numpy as np
+
+from brainbulge.solver.mixed import MixedForm
+
+
+@dataclass
+class Samples:
+    """The solution sampled at ``n`` points."""
+
+    X: np.ndarray  # (n, dim) reference coordinates
+    u: np.ndarray  # (n, dim) displacement
+    F: np.ndarray  # (n, 3, 3) deformation gradient (plane strain: F33 = 1)
+    p: np.ndarray  # (n,) multiplier, tension-positive [kPa]
+    Js: np.ndarray  # (n,) current swelling
+
+
+def sample(form: MixedForm, points: object) -> Samples:
+    """Evaluate the state of ``form`` at NGSolve mesh points (``MapToAllElements`` output)."""
+    dim = form.dim
+    X = np.asarray(ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])(points)).reshape(-1, dim)
+    u = np.asarray(form.u(points)).reshape(-1, dim)
+    G = np.asarray(ngs.Grad(form.u)(points)).reshape(-1, dim, dim)
+    F = np.tile(np.eye(3), (len(X), 1, 1))
+    F[:, :dim, :dim] += G
+    p = np.asarray(form.p(points)).reshape(-1)
+    Js = np.asarray(form.Js_current()(points)).reshape(-1)
+    return Samples(X, u, F, p, Js)
+
+
+def radial_directions(X: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Unit vectors from ``centre`` to ``X`` (3 components; zero where ``X = centre``)."""
+    d = X - np.asarray(centre)[: X.shape[1]]
+    norm = np.linalg.norm(d, axis=1, keepdims=True)
+    n = np.divide(d, norm, out=np.zeros_like(d), where=norm > 0)
+    return np.pad(n, ((0, 0), (0, 3 - X.shape[1])))
+
+
+def stretch_along(C: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """``sqrt(n . C n)`` for unit reference directions ``n`` (shape (n, 3))."""
+    return np.sqrt(np.einsum("ni,nij,nj->n", n, C, n))
+
+
+def tangential_stretch(C: np.ndarray, n: np.ndarray, dim: int) -> np.ndarray:
+    """Largest stretch perpendicular to ``n`` (2D: the in-plane perpendicular)."""
+    if dim == 2:
+        t = np.stack([-n[:, 1], n[:, 0], np.zeros(len(n))], axis=1)
+        return stretch_along(C, t)
+    # C projected onto the plane normal to n: eigenvalues (m1, m2, 0)
+    P = np.eye(3) - n[:, :, None] * n[:, None, :]
+    Q = P @ C @ P
+    trQ = np.trace(Q, axis1=1, axis2=2)
+    trQ2 = np.einsum("nij,nji->n", Q, Q)
+    disc = np.sqrt(np.maximum(2 * trQ2 - trQ**2, 0.0))
+    return np.sqrt((trQ + disc) / 2)
+
+
+def max_principal_strain(C: np.ndarray) -> np.ndarray:
+    """Largest eigenvalue of ``E = (C - I)/2``."""
+    return 0.5 * (np.linalg.eigvalsh(C)[:, -1] - 1.0)
+
+
+def output_fields(
+    s: Samples, centre: np.ndarray, fibres: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
+    """All pointwise outputs of MODEL.md section 3 at the sampled points.
+
+    ``fibres`` (n, 3) replaces the default radial axon direction from ``centre``.
+    """
+    dim = s.X.shape[1]
+    C = np.swapaxes(s.F, 1, 2) @ s.F
+    J = np.linalg.det(s.F)
+    n = radial_directions(s.X, centre) if fibres is None else fibres
+    return {
+        "u": s.u,
+        "u_magnitude": np.linalg.norm(s.u, axis=1),
+        "u_vertical": s.u[:, dim - 1],
+        "max_principal_strain": max_principal_strain(C),
+        "lambda_n": stretch_along(C, n),
+        "lambda_t": tangential_stretch(C, n, dim),
+        "J": J,
+        "Je": J / s.Js,
+        "Js": s.Js,
+        "pressure": -s.p,
+    }
