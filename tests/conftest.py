@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import ngsolve as ngs
 import pytest
-from netgen.occ import X, Y, Z, Box, OCCGeometry, Rectangle
+from netgen.occ import Box, OCCGeometry, Rectangle, X, Y, Z
 
 
 def unit_box_mesh(dim: int, h: float = 0.35) -> ngs.Mesh:

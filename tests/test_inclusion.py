@@ -8,8 +8,8 @@ symmetry, so the map is exact in the bounded domain too.
 
 from __future__ import annotations
 
-import numpy as np
 import ngsolve as ngs
+import numpy as np
 import pytest
 
 from brainbulge.geometry.inclusion import inclusion_mesh

@@ -8,7 +8,7 @@ surface. Regions: ``inclusion`` (radius ``A``) and ``matrix`` (out to radius ``R
 from __future__ import annotations
 
 import ngsolve as ngs
-from netgen.occ import X, Y, Z, Box, Circle, Glue, OCCGeometry, Rectangle, Sphere
+from netgen.occ import Box, Circle, Glue, OCCGeometry, Rectangle, Sphere, X, Y, Z
 
 from brainbulge.errors import InputError
 

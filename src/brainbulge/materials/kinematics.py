@@ -19,9 +19,7 @@ def deformation_gradient(u: ngs.CoefficientFunction, dim: int) -> ngs.Coefficien
         return ngs.Id(3) + G
     if dim != 2:
         raise ValueError(f"dimension must be 2 or 3, got {dim}")
-    return ngs.CF(
-        (1 + G[0, 0], G[0, 1], 0, G[1, 0], 1 + G[1, 1], 0, 0, 0, 1), dims=(3, 3)
-    )
+    return ngs.CF((1 + G[0, 0], G[0, 1], 0, G[1, 0], 1 + G[1, 1], 0, 0, 0, 1), dims=(3, 3))
 
 
 def jacobian(F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:

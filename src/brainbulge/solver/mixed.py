@@ -9,7 +9,11 @@ with ``Js(t) = 1 + t (Js - 1)`` the swelling ramped by the load factor ``t`` in 
 is the Lagrange multiplier of ``J = Js`` (tension positive). Contact is frictionless and
 unilateral against rigid obstacles with signed distance ``g`` (``g >= 0`` admissible), by an
 augmented Lagrangian: ``r`` is the penalty, ``lambda >= 0`` the contact pressure, updated by
-Uzawa's rule ``lambda <- <lambda - r g>_+`` until the penetration is below tolerance.
+Uzawa's rule ``lambda <- s(lambda - r g)`` until the penetration is below tolerance. ``s`` is
+a C1-smoothed ramp ``<z>_+`` (width ``eps = 0.02 mu``), and the obstacle is offset by
+``eps/(2r)`` so that ``g = 0`` is the converged state wherever the contact pressure exceeds
+``eps``. The contact term written above with ``<.>_+^2/(2r)`` is, precisely,
+``S(lambda - r g)/r`` with ``S' = s``.
 
 NGSolve's ``Variation`` differentiates ``Pi`` symbolically: residual and tangent come exactly
 from the energy. Inf-sup stable pairs: Taylor-Hood P2/P1 (2D and 3D) and MINI, P1 + bubble /
@@ -76,8 +80,7 @@ class MixedForm:
         self.Js = problem.swelling_cf()
         Js_t = 1 + self.load * (self.Js - 1)
         W = self._psi_iso(F) + p * (J - Js_t)
-        if compile_energy:
-            W = W.Compile(realcompile=True, wait=True)
+        W = W.Compile(realcompile=compile_energy, wait=True)
         self.a = ngs.BilinearForm(self.fes, symmetric=True, condense=self.condense)
         self.a += ngs.Variation(W * ngs.dx)
 
@@ -87,24 +90,36 @@ class MixedForm:
         self.contact_gaps: list[ngs.CoefficientFunction] = []
         self.contact_regions: list[ngs.Region] = []
         self.contact_masks: list[ngs.CoefficientFunction] = []
+        self._contact_z: list[ngs.CoefficientFunction] = []
         h = _mesh_size(mesh)
-        self.r = contact_penalty if contact_penalty is not None else 100 * self.mu_max / h
+        self.r0 = contact_penalty if contact_penalty is not None else 100 * self.mu_max / h
+        self.r = ngs.Parameter(self.r0)  # raised by penalty continuation at the final load
+        self.eps_c = 0.02 * self.mu_max  # smoothing of the contact law [kPa]
+        self.g_off = self.eps_c / (2 * self.r)  # makes g = 0 the fixed point of Uzawa
         X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
         for c in problem.contacts:
             region = mesh.Boundaries(c.boundary)
             if not any(region.Mask()):
                 raise InputError(f"contact boundary {c.boundary!r} matches no mesh boundary")
-            L = ngs.H1(mesh, order=2, definedon=region)
+            # multiplier and initial gap: discontinuous per boundary facet, so that the Uzawa
+            # update is a local projection that does not smear the peaked contact pressure
+            L = ngs.SurfaceL2(mesh, order=3, definedon=region)
             lam = ngs.GridFunction(L)
-            g = c.obstacle.gap(X + u)
-            z = lam - self.r * g
-            Wc = 1 / (2 * self.r) * ngs.IfPos(z, z * z, 0)
+            # initial-gap adjustment (as Abaqus' "adjust"): the curved mesh boundary lies on
+            # the skull only up to the geometric error, ~1e-6 R; gaps and overclosures below
+            # 1e-3 h at rest are removed, so a boundary that rests on the skull touches it
+            g_rest = c.obstacle.gap(X)
+            g0 = ngs.GridFunction(L)
+            g0.Set(ngs.IfPos(1e-3 * h - ngs.Norm(g_rest), g_rest, 0), ngs.BND, definedon=region)
+            g = c.obstacle.gap(X + u) - g0
+            Wc = contact_energy(lam - self.r * (g - self.g_off), self.r, self.eps_c)
             self.a += ngs.Variation(Wc * ngs.ds(definedon=region))
             self.contact_multipliers.append(lam)
             self.contact_regions.append(region)
             self.contact_masks.append(boundary_indicator(mesh, c.boundary))
             u_gf = self.gfu.components[0]
-            self.contact_gaps.append(c.obstacle.gap(X + u_gf))
+            self.contact_gaps.append(c.obstacle.gap(X + u_gf) - g0)
+            self._contact_z.append(lam - self.r * (self.contact_gaps[-1] - self.g_off))
 
     def _psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         """Isochoric energy over all regions: one expression with region-wise coefficients."""
@@ -119,6 +134,10 @@ class MixedForm:
             mask = mesh.MaterialCF({region: 1.0}, default=0.0)
             psi = psi + mask * m.psi_iso(F)
         return psi
+
+    @property
+    def contacts_present(self) -> bool:
+        return bool(self.contact_multipliers)
 
     # --- fields of the current state -------------------------------------------------
     @property
@@ -148,20 +167,16 @@ class MixedForm:
 
     def update_contact_multipliers(self) -> None:
         """Uzawa update ``lambda <- <lambda - r g>_+`` on each contact boundary."""
-        for lam, g, region in zip(
-            self.contact_multipliers, self.contact_gaps, self.contact_regions, strict=True
+        for lam, z, region in zip(
+            self.contact_multipliers, self._contact_z, self.contact_regions, strict=True
         ):
-            z = lam - self.r * g
-            lam.Set(ngs.IfPos(z, z, 0), ngs.BND, definedon=region)
+            lam.Set(contact_pressure_law(z, self.eps_c), ngs.BND, definedon=region)
 
     def contact_pressure(self) -> ngs.CoefficientFunction:
         """Current contact pressure ``<lambda - r g>_+`` [kPa] (zero off contact)."""
         total = ngs.CF(0)
-        for lam, g, mask in zip(
-            self.contact_multipliers, self.contact_gaps, self.contact_masks, strict=True
-        ):
-            z = lam - self.r * g
-            total = total + ngs.IfPos(z, z, 0) * mask
+        for z, mask in zip(self._contact_z, self.contact_masks, strict=True):
+            total = total + contact_pressure_law(z, self.eps_c) * mask
         return total
 
     def gap(self) -> ngs.CoefficientFunction:
@@ -170,6 +185,21 @@ class MixedForm:
         for g, mask in zip(self.contact_gaps, self.contact_masks, strict=True):
             total = total + ngs.IfPos(mask - 0.5, g, 0)
         return total
+
+
+def contact_pressure_law(z: ngs.CoefficientFunction, eps: float) -> ngs.CoefficientFunction:
+    """Smoothed ramp ``s(z)``: 0 for z <= 0, ``z^2/(2 eps)`` up to ``eps``, ``z - eps/2`` above.
+
+    A C1 contact law keeps the Newton tangent continuous when integration points enter or
+    leave contact (a sharp ``<z>_+`` made the active set chatter at the opening's corners).
+    """
+    return ngs.IfPos(z, ngs.IfPos(z - eps, z - eps / 2, z * z / (2 * eps)), 0)
+
+
+def contact_energy(z: ngs.CoefficientFunction, r: float, eps: float) -> ngs.CoefficientFunction:
+    """Potential with ``d/dg = -s(z)`` for ``z = lambda - r g``: ``S(z)/r``, ``S' = s``."""
+    S = ngs.IfPos(z, ngs.IfPos(z - eps, z * z / 2 - eps * z / 2 + eps**2 / 6, z**3 / (6 * eps)), 0)
+    return S / r
 
 
 def boundary_indicator(mesh: ngs.Mesh, pattern: str) -> ngs.CoefficientFunction:

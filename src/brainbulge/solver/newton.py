@@ -50,7 +50,7 @@ class SolverOptions:
     max_iterations: int = 20
     tolerance: float = 1e-9
     penetration_tol: float = 1e-5
-    max_augmentations: int = 8
+    max_augmentations: int = 10
     linear_solver: str = "pardiso"
     progress: bool = False
 
@@ -120,7 +120,8 @@ class NewtonSolver:
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
         t0 = time.perf_counter()
-        self.form.a.Apply(x, self.res)
+        with ngs.TaskManager():
+            self.form.a.Apply(x, self.res)
         self.t_assembly += time.perf_counter() - t0
         return self.res.FV().NumPy().copy()
 
@@ -135,7 +136,8 @@ class NewtonSolver:
     def tangent(self, x: ngs.BaseVector) -> sp.csr_matrix:
         """The assembled (condensed) tangent restricted to the free DOFs."""
         t0 = time.perf_counter()
-        self.form.a.AssembleLinearization(x)
+        with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
+            self.form.a.AssembleLinearization(x)
         K = sp.csr_matrix(self.form.a.mat.CSR())
         self.t_assembly += time.perf_counter() - t0
         return K[self.free][:, self.free]
@@ -184,7 +186,7 @@ class NewtonSolver:
                     norm = trial
                     break
                 s *= 0.5
-                if s < 1 / 64:
+                if s < 1 / 1024:
                     x.data = x0
                     return False, it, norm
         return False, self.opt.max_iterations, norm
@@ -203,6 +205,42 @@ class NewtonSolver:
             if on.any():
                 pen = max(pen, float(np.max(-q(g)[on])))
         return max(pen, 0.0)
+
+    def augment(
+        self, x: ngs.BaseVector, pen: float, pen_tol: float
+    ) -> tuple[int, int, float, float]:
+        """Uzawa updates of the contact pressure until the penetration is below ``pen_tol``.
+
+        An update whose Newton solve fails is undone and the augmentation stops: the last
+        converged state (and its penetration, reported) is kept.
+        """
+        form = self.form
+        n_aug = its = 0
+        norm = 0.0
+        r0 = form.r.Get()
+        while pen > pen_tol and n_aug < self.opt.max_augmentations:
+            saved_x = x.CreateVector()
+            saved_x.data = x
+            saved_lam = [lam.vec.FV().NumPy().copy() for lam in form.contact_multipliers]
+            saved_r = form.r.Get()
+            if form.r.Get() < 1e3 * r0 and pen > 10 * pen_tol:
+                # penalty continuation: penetration ~ 1/r, Newton restarts from a close state
+                form.r.Set(form.r.Get() * 3)
+            else:
+                form.update_contact_multipliers()
+            ok, k, norm = self.newton(x)
+            its += k
+            if not ok:
+                x.data = saved_x
+                form.r.Set(saved_r)
+                for lam, v in zip(form.contact_multipliers, saved_lam, strict=True):
+                    lam.vec.FV().NumPy()[:] = v
+                log.warning("contact augmentation stopped: penetration %.3g", pen)
+                break
+            n_aug += 1
+            pen = self.max_penetration()
+            log.info("  augmentation %d: penetration %.3e", n_aug, pen)
+        return n_aug, its, norm, pen
 
     # --- load stepping -----------------------------------------------------------------
     def check_feasible(self) -> None:
@@ -248,12 +286,9 @@ class NewtonSolver:
                 n_aug, pen = 0, 0.0
                 if ok and form.contact_multipliers:
                     pen = self.max_penetration()
-                    while ok and pen > pen_tol and n_aug < opt.max_augmentations:
-                        form.update_contact_multipliers()
-                        ok, its2, norm = self.newton(x)
+                    if t + dt >= 1 - 1e-12:  # augment at the final load only
+                        n_aug, its2, norm, pen = self.augment(x, pen, pen_tol)
                         its += its2
-                        n_aug += 1
-                        pen = self.max_penetration()
                 if not ok:
                     sol.rejected_steps += 1
                     x.data = x_prev

@@ -1,0 +1,84 @@
+"""The rigid skull of the 2D hemidisk as a signed distance function (an obstacle).
+
+The skull is a circular shell of inner radius ``R`` and thickness ``T`` with an opening of
+angle ``beta`` centred at angle ``theta_o``. Its cut faces have rounded edges of radius ``rho``:
+the body is the set of points within ``rho`` of a *core*, the annular sector
+``R + rho <= r <= R + T - rho`` outside the opening, so that its inner surface is exactly the
+circle ``r = R`` up to the opening angles and then turns outward on a circle of radius ``rho``.
+
+The gap ``g(x) = dist(x, core) - rho`` is positive outside the skull, negative inside it:
+
+- at angles covered by the skull, ``dist = max(R + rho - r, r - (R + T - rho), 0)``;
+- in the opening, ``dist`` is the distance to the nearer end segment of the core.
+
+It is written with NGSolve coefficient functions of the deformed position ``x = X + u`` so that
+the contact residual and tangent come from symbolic differentiation; :meth:`gap_numpy` is the
+same formula for arrays (tests, plots).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import ngsolve as ngs
+import numpy as np
+
+from brainbulge.errors import InputError
+
+
+@dataclass(frozen=True)
+class RigidSkull2D:
+    """Skull shell: inner radius ``R``, opening ``beta_deg`` centred at ``center_deg``,
+    thickness ``thickness`` and cut-edge radius ``edge_radius`` [length]."""
+
+    R: float = 1.0
+    beta_deg: float = 60.0
+    center_deg: float = 90.0
+    thickness: float = 0.2
+    edge_radius: float = 0.02
+
+    def __post_init__(self) -> None:
+        if not 0 < 2 * self.edge_radius < self.thickness:
+            raise InputError(
+                f"skull edge radius {self.edge_radius} must be positive and below half the "
+                f"thickness {self.thickness}"
+            )
+
+    @property
+    def _core(self) -> tuple[float, float, float, float]:
+        rho = self.edge_radius
+        return self.R + rho, self.R + self.thickness - rho, math.radians(self.beta_deg) / 2, rho
+
+    def gap(self, x: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
+        """``g(x)`` for a 2-vector CF ``x`` [length]."""
+        R1, R2, half, rho = self._core
+        c, s = math.cos(math.radians(self.center_deg)), math.sin(math.radians(self.center_deg))
+        xr = x[0] * c + x[1] * s  # coordinates rotated so the opening centre is at angle 0
+        yr = -x[0] * s + x[1] * c
+        r = ngs.sqrt(xr * xr + yr * yr + 1e-30)
+        delta = ngs.atan2(yr, xr)
+        band = ngs.IfPos(R1 - r, R1 - r, ngs.IfPos(r - R2, r - R2, 0))
+        # end segment on the side of the point: direction e = (cos, +-sin) of `half`
+        ey = ngs.IfPos(delta, math.sin(half), -math.sin(half))
+        ex = math.cos(half)
+        t = xr * ex + yr * ey
+        t = ngs.IfPos(R1 - t, R1, ngs.IfPos(t - R2, R2, t))
+        d_end = ngs.sqrt((xr - t * ex) ** 2 + (yr - t * ey) ** 2 + 1e-30)
+        in_opening = half - ngs.IfPos(delta, delta, -delta)  # > 0 inside the opening
+        return ngs.IfPos(in_opening, d_end, band) - rho
+
+    def gap_numpy(self, x: np.ndarray) -> np.ndarray:
+        """``g`` at points ``x`` of shape (n, 2) [length]."""
+        R1, R2, half, rho = self._core
+        th = math.radians(self.center_deg)
+        xr = x[:, 0] * math.cos(th) + x[:, 1] * math.sin(th)
+        yr = -x[:, 0] * math.sin(th) + x[:, 1] * math.cos(th)
+        r = np.hypot(xr, yr)
+        delta = np.arctan2(yr, xr)
+        band = np.maximum.reduce([R1 - r, r - R2, np.zeros_like(r)])
+        ey = np.where(delta > 0, math.sin(half), -math.sin(half))
+        ex = math.cos(half)
+        t = np.clip(xr * ex + yr * ey, R1, R2)
+        d_end = np.hypot(xr - t * ex, yr - t * ey)
+        return np.where(np.abs(delta) < half, d_end, band) - rho

@@ -1,0 +1,112 @@
+"""The hemidisk cases of MODEL.md sections 4-5 as :class:`Problem` s.
+
+Contact conditions on the curved boundary:
+
+- ``noslip``: frictional, no sliding: ``u = 0`` on the skull part of the arc;
+- ``sliding``: frictionless unilateral contact of the whole arc (skull part and opening) with
+  the rigid skull of :class:`RigidSkull2D`, so tissue can slide along the skull, separate
+  from it, and bulge through the opening around the rounded cut edges.
+
+The base is clamped in both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from brainbulge.errors import InputError
+from brainbulge.geometry.hemidisk import Hemidisk
+from brainbulge.geometry.skull2d import RigidSkull2D
+from brainbulge.materials import MooneyRivlin, preset
+from brainbulge.model.problem import Contact, Problem
+
+CONTACTS = ("sliding", "noslip")
+
+
+@dataclass
+class HemidiskCase:
+    """One hemidisk run, a plain value that round-trips through TOML.
+
+    Angles in degrees, lengths in units of ``R`` unless ``R`` is given otherwise.
+    """
+
+    alpha: float | None = 80.0
+    beta: float = 60.0
+    opening_center: float = 90.0
+    disk: list[float] | None = None
+    swelling: float = 1.2
+    contact: str = "sliding"
+    R: float = 1.0
+    mesh_size: float = 0.05
+    corner_mesh_size: float | None = None
+    steps: int = 4
+    element: str = "taylor-hood"
+    material: str = "paper"
+    tissue: str = "gray"
+    skull_thickness: float = 0.2
+    skull_edge_radius: float = 0.02
+    edge_exclusion: float = 0.05
+    name: str = "hemidisk"
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.contact not in CONTACTS:
+            raise InputError(f"contact {self.contact!r} unknown; choose 'sliding' or 'noslip'")
+        import math
+
+        if not isinstance(self.swelling, (int, float)) or not math.isfinite(self.swelling):
+            raise InputError(f"swelling Js = {self.swelling!r} must be a number")
+        if self.swelling <= 0:
+            raise InputError(f"swelling Js = {self.swelling} must be positive (1.2 = 20% swelling)")
+        if self.edge_exclusion < 0:
+            raise InputError(f"edge exclusion {self.edge_exclusion} must be >= 0")
+        if self.disk is not None and self.alpha is not None:
+            self.alpha = None  # a disk replaces the default sector
+
+    @property
+    def geometry(self) -> Hemidisk:
+        disk = tuple(self.disk) if self.disk is not None else None
+        if disk is not None and len(disk) != 3:
+            raise InputError("disk needs three numbers: CX CY RADIUS")
+        return Hemidisk(
+            R=self.R,
+            alpha_deg=self.alpha,
+            beta_deg=self.beta,
+            opening_center_deg=self.opening_center,
+            disk=disk,  # type: ignore[arg-type]
+        )
+
+    @property
+    def skull(self) -> RigidSkull2D:
+        return RigidSkull2D(
+            R=self.R,
+            beta_deg=self.beta,
+            center_deg=self.opening_center,
+            thickness=self.skull_thickness * self.R,
+            edge_radius=self.skull_edge_radius * self.R,
+        )
+
+    def tissue_material(self) -> MooneyRivlin:
+        mats = preset(self.material)
+        if self.tissue not in mats:
+            raise InputError(f"tissue {self.tissue!r} not in preset {self.material!r}")
+        return mats[self.tissue]
+
+
+def hemidisk_problem(case: HemidiskCase) -> Problem:
+    """Mesh the hemidisk and set materials, swelling and the contact condition."""
+    geo = case.geometry
+    skull = case.skull
+    mesh = geo.mesh(case.mesh_size * case.R, case.corner_mesh_size)
+    m = case.tissue_material()
+    materials = {r: m for r in set(mesh.GetMaterials())}
+    swelling = {"swelling": case.swelling}
+    if case.contact == "noslip":
+        return Problem(mesh, materials, swelling, clamped="base|skull")
+    return Problem(
+        mesh,
+        materials,
+        swelling,
+        clamped="base",
+        contacts=[Contact("skull|opening", skull)],
+    )

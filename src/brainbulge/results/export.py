@@ -1,0 +1,90 @@
+"""Fields on the mesh vertices and their ParaView file (VTU via meshio).
+
+The displacement gradient is discontinuous between elements, so every field is evaluated at
+each element's own vertices and averaged over the elements that share a vertex (point data);
+region and element averages are cell data. ParaView: *Warp By Vector* on ``u`` shows the
+deformed shape.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import meshio
+import ngsolve as ngs
+import numpy as np
+from scipy.spatial import cKDTree
+
+from brainbulge.results.fields import output_fields, sample
+from brainbulge.solver.mixed import MixedForm
+
+_REF_VERTICES = {
+    2: [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)],
+    3: [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)],
+}
+
+
+@dataclass
+class VertexFields:
+    """Mesh vertices, simplices (0-based vertex numbers) and fields on them."""
+
+    points: np.ndarray  # (nv, dim)
+    cells: np.ndarray  # (ne, dim + 1)
+    regions: np.ndarray  # (ne,) region index
+    region_names: list[str]
+    point_data: dict[str, np.ndarray]
+    cell_data: dict[str, np.ndarray]
+
+
+def vertex_fields(
+    form: MixedForm,
+    centre: np.ndarray,
+    extra: dict[str, ngs.CoefficientFunction] | None = None,
+) -> VertexFields:
+    """Evaluate the outputs of MODEL.md section 3 at the vertices of every element."""
+    mesh = form.mesh
+    dim = mesh.dim
+    points = np.array([v.point for v in mesh.vertices])[:, :dim]
+    cells = np.array([[v.nr for v in el.vertices] for el in mesh.Elements(ngs.VOL)])
+    names = list(mesh.GetMaterials())
+    regions = np.array([el.index for el in mesh.Elements(ngs.VOL)])
+
+    ref = _REF_VERTICES[dim]
+    ir = ngs.IntegrationRule([tuple(list(p) + [0.0] * (3 - dim)) for p in ref], [1.0] * len(ref))
+    mips = mesh.MapToAllElements(ir, ngs.VOL)
+    s = sample(form, mips)
+    fields = output_fields(s, centre)
+    for name, cf in (extra or {}).items():
+        fields[name] = np.asarray(cf(mips)).reshape(len(s.X), -1).squeeze()
+    # match each sampled element vertex to a mesh vertex
+    _, vid = cKDTree(points).query(s.X)
+    count = np.bincount(vid, minlength=len(points)).astype(float)
+    point_data, cell_data = {}, {}
+    ncorner = len(ref)
+    for name, val in fields.items():
+        val = np.asarray(val, dtype=float)
+        acc = np.zeros((len(points),) + val.shape[1:])
+        np.add.at(acc, vid, val)
+        point_data[name] = acc / count.reshape((-1,) + (1,) * (val.ndim - 1))
+        cell_data[name] = val.reshape(len(cells), ncorner, *val.shape[1:]).mean(axis=1)
+    cell_data["region"] = regions.astype(float)
+    return VertexFields(points, cells, regions, names, point_data, cell_data)
+
+
+def write_vtu(path: Path, vf: VertexFields) -> Path:
+    """Write the fields to a VTU file (ParaView, VisIt, meshio)."""
+    dim = vf.points.shape[1]
+    pts = np.pad(vf.points, ((0, 0), (0, 3 - dim)))
+    point_data = {}
+    for k, v in vf.point_data.items():
+        point_data[k] = np.pad(v, ((0, 0), (0, 3 - dim))) if v.ndim == 2 else v
+    cell_type = "triangle" if dim == 2 else "tetra"
+    cell_data = {
+        k: [np.pad(v, ((0, 0), (0, 3 - dim))) if v.ndim == 2 else v]
+        for k, v in vf.cell_data.items()
+    }
+    m = meshio.Mesh(pts, [(cell_type, vf.cells)], point_data=point_data, cell_data=cell_data)
+    path = Path(path)
+    m.write(path)
+    return path

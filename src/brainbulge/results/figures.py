@@ -1,0 +1,164 @@
+"""Figures of 2D fields (matplotlib), in the layouts of the paper's Figures 2-5."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.tri as mtri  # noqa: E402
+import numpy as np  # noqa: E402
+
+from brainbulge.results.export import VertexFields  # noqa: E402
+
+LABELS = {
+    "u_magnitude": "|u|",
+    "u_vertical": "vertical displacement",
+    "lambda_n": r"radial stretch $\lambda_n$",
+    "lambda_t": r"tangential stretch $\lambda_t$",
+    "max_principal_strain": "max principal strain",
+    "pressure": "pressure [kPa]",
+    "J": "J",
+}
+CMAPS = {"lambda_n": "RdBu_r", "lambda_t": "RdBu_r", "pressure": "coolwarm"}
+
+
+def _triangulation(vf: VertexFields, deformed: bool, mask: np.ndarray | None = None):
+    xy = vf.points + (vf.point_data["u"] if deformed else 0.0)
+    return mtri.Triangulation(xy[:, 0], xy[:, 1], vf.cells, mask=mask)
+
+
+def _limits(field: str, values: Sequence[np.ndarray]) -> tuple[float, float]:
+    lo = min(float(np.percentile(v, 0.5)) for v in values)
+    hi = max(float(np.percentile(v, 99.5)) for v in values)
+    if field.startswith("lambda"):  # symmetric about 1: stretch red, compression blue
+        d = max(abs(hi - 1), abs(1 - lo), 1e-6)
+        return 1 - d, 1 + d
+    return lo, hi if hi > lo else lo + 1e-12
+
+
+def _draw(ax, vf: VertexFields, field: str, vmin: float, vmax: float, mask=None):
+    tri = _triangulation(vf, deformed=True, mask=mask)
+    return ax.tripcolor(
+        tri,
+        vf.point_data[field],
+        shading="gouraud",
+        cmap=CMAPS.get(field, "viridis"),
+        vmin=vmin,
+        vmax=vmax,
+    )
+
+
+def plot_fields(
+    vf: VertexFields,
+    path: Path,
+    title: str = "",
+    fields: Sequence[str] = ("u_magnitude", "u_vertical", "lambda_n", "lambda_t"),
+) -> Path:
+    """Panels of fields on the deformed configuration."""
+    fig, axes = plt.subplots(1, len(fields), figsize=(4.2 * len(fields), 2.8), squeeze=False)
+    for ax, f in zip(axes[0], fields, strict=True):
+        vmin, vmax = _limits(f, [vf.point_data[f]])
+        im = _draw(ax, vf, f, vmin, vmax)
+        _outline(ax, vf)
+        ax.set_title(LABELS.get(f, f), fontsize=10)
+        fig.colorbar(im, ax=ax, shrink=0.8)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_side_by_side(
+    left: VertexFields,
+    right: VertexFields,
+    path: Path,
+    labels: tuple[str, str] = ("no-slip", "sliding"),
+    fields: Sequence[str] = ("u_magnitude", "u_vertical", "lambda_n", "lambda_t"),
+    title: str = "",
+) -> Path:
+    """The paper's layout: left half of the disk from one run, right half from the other."""
+    fig, axes = plt.subplots(1, len(fields), figsize=(4.2 * len(fields), 2.8), squeeze=False)
+    for ax, f in zip(axes[0], fields, strict=True):
+        vmin, vmax = _limits(f, [left.point_data[f], right.point_data[f]])
+        _draw(ax, left, f, vmin, vmax, mask=_half(left, keep_left=True))
+        im = _draw(ax, right, f, vmin, vmax, mask=_half(right, keep_left=False))
+        _outline(ax, left)
+        ax.axvline(0, color="k", lw=0.5)
+        ax.set_title(f"{LABELS.get(f, f)}\n{labels[0]} | {labels[1]}", fontsize=9)
+        fig.colorbar(im, ax=ax, shrink=0.8)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_grid(
+    panels: dict[tuple[float, float], VertexFields],
+    field: str,
+    path: Path,
+    row_label: str = "beta",
+    col_label: str = "alpha",
+    title: str = "",
+) -> Path:
+    """A grid of one field: rows and columns indexed by the two keys of ``panels``."""
+    rows = sorted({k[0] for k in panels})
+    cols = sorted({k[1] for k in panels})
+    fig, axes = plt.subplots(
+        len(rows), len(cols), figsize=(2.6 * len(cols), 1.6 * len(rows)), squeeze=False
+    )
+    vmin, vmax = _limits(field, [v.point_data[field] for v in panels.values()])
+    im = None
+    for i, rv in enumerate(rows):
+        for j, cv in enumerate(cols):
+            ax = axes[i][j]
+            ax.set_axis_off()
+            if (rv, cv) in panels:
+                im = _draw(ax, panels[(rv, cv)], field, vmin, vmax)
+                ax.set_aspect("equal")
+            if i == 0:
+                ax.set_title(f"{col_label} = {cv:g}", fontsize=8)
+            if j == 0:
+                ax.text(-1.25, 0.5, f"{row_label} = {rv:g}", fontsize=8, rotation=90, va="center")
+    if im is not None:
+        fig.colorbar(im, ax=axes, shrink=0.6, label=LABELS.get(field, field))
+    fig.suptitle(title or LABELS.get(field, field), fontsize=10)
+    return _save(fig, path)
+
+
+def plot_row(
+    panels: Sequence[tuple[str, VertexFields]], field: str, path: Path, title: str = ""
+) -> Path:
+    """One field for several runs side by side (e.g. the five disk positions)."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.0 * len(panels), 2.0), squeeze=False)
+    vmin, vmax = _limits(field, [v.point_data[field] for _, v in panels])
+    im = None
+    for ax, (label, vf) in zip(axes[0], panels, strict=True):
+        im = _draw(ax, vf, field, vmin, vmax)
+        _outline(ax, vf)
+        ax.set_title(label, fontsize=8)
+    if im is not None:
+        fig.colorbar(im, ax=axes, shrink=0.7, label=LABELS.get(field, field))
+    fig.suptitle(title or LABELS.get(field, field), fontsize=10)
+    return _save(fig, path)
+
+
+def _half(vf: VertexFields, keep_left: bool) -> np.ndarray:
+    cx = vf.points[vf.cells, 0].mean(axis=1)
+    return cx > 0 if keep_left else cx < 0
+
+
+def _outline(ax, vf: VertexFields) -> None:
+    """The undeformed boundary (a semicircle and its base) as a thin line."""
+    r = np.sqrt((vf.points**2).sum(axis=1)).max()
+    t = np.linspace(0, np.pi, 200)
+    ax.plot(r * np.cos(t), r * np.sin(t), color="0.3", lw=0.6, ls="--")
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+
+
+def _save(fig, path: Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    return path

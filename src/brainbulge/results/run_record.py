@@ -1,0 +1,327 @@
+"""Output folders and reproducibility records, shared by every CLI command.
+
+A run's output folder holds, besides its results:
+
+``run.toml``
+    the exact, fully resolved configuration; ``load_config`` reads it back, so
+    ``brainbulge <command> --config out/run.toml`` repeats the run.
+``run.json``
+    provenance: command line, brainbulge / Python / platform / library versions, start time,
+    random seed (if the configuration has one) and the git commit of the source tree.
+``status.json``
+    ``{"status": "running" | "complete" | "incomplete" | "failed", "message", "time"}``,
+    so a crashed or interrupted run is recognisable from its folder alone.
+
+All JSON/TOML files are written atomically (temporary file in the same folder, then
+``os.replace``): a reader never sees half a file, even after a crash.
+
+>>> import tempfile
+>>> out = prepare_output_dir(Path(tempfile.mkdtemp()) / "run1", overwrite=False)
+>>> toml_path = write_run_record(out, {"seed": 7, "mesh": {"h_mm": 2.0}}, ["brainbulge", "x"])
+>>> load_config(toml_path)
+{'seed': 7, 'mesh': {'h_mm': 2.0}}
+>>> mark_status(out, "complete").name
+'status.json'
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import tomllib
+from collections.abc import Mapping
+from datetime import UTC, date, datetime, time
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path, PurePath
+from typing import Any
+
+import tomli_w
+
+from brainbulge import __version__
+from brainbulge.errors import InputError
+
+__all__ = [
+    "STATUSES",
+    "atomic_write_json",
+    "atomic_write_text",
+    "is_run_folder",
+    "load_config",
+    "mark_status",
+    "prepare_output_dir",
+    "toml_ready",
+    "write_run_record",
+]
+
+#: Allowed values of ``status.json["status"]``.
+STATUSES = ("running", "complete", "incomplete", "failed")
+
+#: Distributions whose versions go into ``run.json`` (those installed).
+RECORDED_PACKAGES = (
+    "numpy",
+    "scipy",
+    "ngsolve",
+    "pypardiso",
+    "meshio",
+    "matplotlib",
+    "dask",
+    "distributed",
+    "nibabel",
+    "nilearn",
+)
+
+#: Files that mark a folder as written by brainbulge (what ``overwrite`` may clear).
+RUN_MARKERS = ("run.json", "run.toml", "status.json", "study.json")
+
+
+# --------------------------------------------------------------------------- atomic files
+
+
+def atomic_write_text(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically: a temporary file in the same folder, then rename.
+
+    Readers see either the old or the new content, never a truncated file.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_json(path: Path, data: Any) -> Path:
+    """Write ``data`` as indented JSON to ``path`` atomically (see `atomic_write_text`)."""
+    return atomic_write_text(path, json.dumps(data, indent=2, allow_nan=True) + "\n")
+
+
+# --------------------------------------------------------------------------- output folder
+
+
+def is_run_folder(path: Path) -> bool:
+    """True if ``path`` holds a brainbulge run record, status or study file."""
+    return any((Path(path) / name).is_file() for name in RUN_MARKERS)
+
+
+def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Path:
+    """Create the output folder ``path`` (with parents) and return it.
+
+    An existing empty folder is used as is. A non-empty one is refused unless
+
+    * ``overwrite``: the folder is a previous brainbulge output (it holds ``run.json``,
+      ``run.toml``, ``status.json`` or ``study.json``); its contents are deleted so stale
+      results cannot mix with new ones. A non-empty folder that is *not* a brainbulge output
+      is never deleted, even with ``overwrite``.
+    * ``resume``: the folder holds a ``study.json`` (a resumable study); it is reused as is,
+      finished scenarios are kept.
+
+    Raises `InputError` with a one-line message otherwise.
+    """
+    path = Path(path)
+    if overwrite and resume:
+        raise InputError("--overwrite and --resume contradict each other; pass only one")
+    if path.exists() and not path.is_dir():
+        raise InputError(f"output folder {path} exists and is a file; choose another --out")
+    if path.is_dir() and any(path.iterdir()):
+        if resume:
+            if not (path / "study.json").is_file():
+                raise InputError(
+                    f"cannot resume: output folder {path} is not empty and holds no study.json;"
+                    " choose another --out"
+                )
+            return path
+        if not overwrite:
+            raise InputError(
+                f"output folder {path} exists and is not empty; pass --overwrite or choose"
+                " another --out"
+            )
+        if not is_run_folder(path):
+            raise InputError(
+                f"output folder {path} is not empty and is not a brainbulge output (no run.json"
+                " or study.json); refusing to delete it, choose another --out"
+            )
+        for child in path.iterdir():
+            if child.is_dir() and not child.is_symlink():
+                shutil.rmtree(child)
+            else:
+                child.unlink()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create output folder {path}: {exc.strerror or exc}") from exc
+    return path
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+def toml_ready(value: Any, _where: str = "config") -> Any:
+    """Convert a configuration to what TOML can hold.
+
+    Tuples/sets -> lists, paths -> str, enums -> their value, dataclasses -> tables, numpy
+    scalars/arrays -> Python numbers/lists; keys whose value is None are dropped (TOML has no
+    null). Raises TypeError naming the offending key for anything else (or None in a list).
+    """
+    if value is None:
+        raise TypeError(f"{_where}: None inside a list cannot be written to TOML")
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = dataclasses.asdict(value)
+    if isinstance(value, Mapping):
+        out = {}
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise TypeError(f"{_where}: key {key!r} is not a string")
+            if item is None:
+                continue
+            out[key] = toml_ready(item, f"{_where}.{key}")
+        return out
+    if isinstance(value, enum.Enum):
+        return toml_ready(value.value, _where)
+    if isinstance(value, bool | int | float | str | datetime | date | time):
+        return value
+    if isinstance(value, PurePath):
+        return str(value)
+    if hasattr(value, "tolist") and callable(value.tolist):  # numpy scalar or array
+        return toml_ready(value.tolist(), _where)
+    if isinstance(value, list | tuple):
+        return [toml_ready(item, f"{_where}[{i}]") for i, item in enumerate(value)]
+    if isinstance(value, set | frozenset):
+        return [toml_ready(item, f"{_where}[]") for item in sorted(value)]
+    raise TypeError(f"{_where}: {type(value).__name__} cannot be written to TOML")
+
+
+def load_config(path: Path) -> dict[str, Any]:
+    """Read a TOML configuration file; `InputError` (one line, with the line number of a
+    syntax error) if it is missing, unreadable or not valid TOML."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read config {path}: {exc.strerror or exc}") from exc
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"config {path} is not UTF-8 text (byte {exc.start}); save it as UTF-8"
+        ) from exc
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else "syntax error"
+        lineno = getattr(exc, "lineno", None)  # attribute exists from Python 3.14 on
+        if lineno is None:
+            found = re.search(r"line (\d+)", msg)
+            lineno = int(found.group(1)) if found else None
+        msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)\s*$", "", msg)
+        where = f"line {lineno}" if lineno is not None else "end of file"
+        raise InputError(f"invalid TOML in {path}, {where}: {msg}") from exc
+
+
+# --------------------------------------------------------------------------- provenance
+
+
+def _package_versions() -> dict[str, str]:
+    versions = {}
+    for name in RECORDED_PACKAGES:
+        try:
+            versions[name] = version(name)
+        except PackageNotFoundError:
+            continue
+    return versions
+
+
+def _git_commit() -> str | None:
+    """Commit (``+dirty`` if modified) of the source tree brainbulge runs from, if any."""
+    src = Path(__file__).resolve().parent
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(src), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(src), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return f"{head}+dirty" if dirty else head or None
+
+
+def _find_seed(config: Mapping[str, Any]) -> Any:
+    """The first ``seed`` / ``random_seed`` value in ``config``, searched breadth-first."""
+    queue: list[Mapping[str, Any]] = [config]
+    while queue:
+        table = queue.pop(0)
+        for key in ("seed", "random_seed"):
+            if table.get(key) is not None:
+                return table[key]
+        queue.extend(v for v in table.values() if isinstance(v, Mapping))
+    return None
+
+
+def write_run_record(out_dir: Path, config: Mapping[str, Any], command: list[str] | None) -> Path:
+    """Write ``run.toml`` (the resolved ``config``) and ``run.json`` (provenance) into
+    ``out_dir``; return the path of ``run.toml``.
+
+    ``command`` is the command line to record (``sys.argv`` if None). ``config`` must be
+    convertible by `toml_ready` (tuples, paths, enums, dataclasses, numpy values are
+    converted; None values are dropped).
+    """
+    out_dir = Path(out_dir)
+    start = datetime.now(UTC).isoformat(timespec="seconds")
+    try:
+        table = toml_ready(config)
+    except TypeError as exc:
+        raise InputError(f"configuration cannot be recorded: {exc}") from exc
+    toml_path = atomic_write_text(out_dir / "run.toml", tomli_w.dumps(table))
+    record = {
+        "command": list(sys.argv if command is None else command),
+        "brainbulge_version": __version__,
+        "git_commit": _git_commit(),
+        "python_version": platform.python_version(),
+        "python_implementation": platform.python_implementation(),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "packages": _package_versions(),
+        "start_time": start,
+        "seed": _find_seed(table),
+        "config_file": toml_path.name,
+    }
+    atomic_write_json(out_dir / "run.json", record)
+    return toml_path
+
+
+def mark_status(out_dir: Path, status: str, message: str = "") -> Path:
+    """Write ``status.json`` ``{"status", "message", "time"}`` atomically; return its path.
+
+    ``status`` is one of `STATUSES`: "running" (started), "complete", "incomplete"
+    (stopped early, e.g. not all load steps or scenarios finished) or "failed".
+    """
+    if status not in STATUSES:
+        raise ValueError(f"status must be one of {', '.join(STATUSES)}, not {status!r}")
+    record = {
+        "status": status,
+        "message": " ".join(str(message).split()),
+        "time": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    return atomic_write_json(Path(out_dir) / "status.json", record)

@@ -1,0 +1,102 @@
+"""Scalar summaries of a solution: extremes of the fields and checks of the constraint.
+
+Stretches and strains are singular (order r^-1/2 in the stress) at the opening corners and where
+a swelling interface meets a constrained boundary, so their raw extremes grow without bound
+under refinement. Both are reported: ``raw_max_*`` / ``raw_min_*`` over all integration points,
+and mesh-convergent ``max_*`` / ``min_*`` over the integration points farther than
+``edge_exclusion`` from every singular point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from brainbulge.results.fields import output_fields, sample
+from brainbulge.results.quadrature import quadrature_points
+from brainbulge.solver.newton import NewtonSolver, Solution
+
+#: summary key stem -> (field name, extreme kinds)
+EXTREMES = {
+    "radial_stretch": ("lambda_n", ("max", "min")),
+    "tangential_stretch": ("lambda_t", ("max", "min")),
+    "principal_strain": ("max_principal_strain", ("max",)),
+}
+
+
+def away_from(X: np.ndarray, points: list[tuple[float, ...]], radius: float) -> np.ndarray:
+    """Mask of rows of ``X`` farther than ``radius`` from all ``points``."""
+    keep = np.ones(len(X), dtype=bool)
+    for p in points:
+        keep &= np.linalg.norm(X - np.asarray(p)[: X.shape[1]], axis=1) > radius
+    return keep
+
+
+def field_extremes(
+    X: np.ndarray,
+    fields: dict[str, np.ndarray],
+    keep: np.ndarray,
+    prefix: str = "",
+) -> dict[str, object]:
+    """``max_*``/``min_*`` over ``keep``, ``raw_*`` over all points, and argmax locations."""
+    out: dict[str, object] = {}
+    for stem, (name, kinds) in EXTREMES.items():
+        v = fields[name]
+        for kind in kinds:
+            f = np.argmax if kind == "max" else np.argmin
+            i_raw = int(f(v))
+            out[f"raw_{kind}_{prefix}{stem}"] = float(v[i_raw])
+            if keep.any():
+                idx = np.flatnonzero(keep)
+                i = int(idx[f(v[idx])])
+                out[f"{kind}_{prefix}{stem}"] = float(v[i])
+                if kind == "max" and stem != "principal_strain":
+                    out[f"argmax_{prefix}{stem}"] = [float(c) for c in X[i]]
+    return out
+
+
+def solution_summary(
+    sol: Solution,
+    solver: NewtonSolver,
+    centre: np.ndarray,
+    singular_points: list[tuple[float, ...]],
+    edge_exclusion: float,
+) -> dict[str, object]:
+    """The summary of MODEL.md section 3 / issue keys for any converged or partial solution."""
+    form = sol.form
+    q = quadrature_points(form.mesh, order=4)
+    s = sample(form, q.points)
+    fields = output_fields(s, centre)
+    keep = away_from(s.X, singular_points, edge_exclusion)
+    dim = form.dim
+    J = fields["J"]
+    out: dict[str, object] = {
+        "converged": sol.converged,
+        "load_reached": sol.load,
+        "load_steps": len(sol.steps),
+        "rejected_steps": sol.rejected_steps,
+        "newton_iterations": sol.newton_iterations,
+        "wall_time_s": round(sol.wall_time_s, 3),
+        "assembly_time_s": round(sol.assembly_time_s, 3),
+        "linear_solve_time_s": round(sol.solve_time_s, 3),
+        "elements": form.mesh.ne,
+        "dofs": form.fes.ndof,
+        "max_displacement": float(fields["u_magnitude"].max()),
+        "max_vertical_displacement": float(fields["u_vertical"].max()),
+        "min_vertical_displacement": float(fields["u_vertical"].min()),
+    }
+    out.update(field_extremes(s.X, fields, keep))
+    out["raw_max_abs_J_minus_Js"] = float(np.max(np.abs(J - s.Js)))
+    out["max_abs_J_minus_Js"] = float(np.max(np.abs(J - s.Js)[keep])) if keep.any() else None
+    out["integral_J_minus_Js"] = float(np.sum((J - s.Js) * q.weights))
+    out["swelling_volume"] = float(np.sum((s.Js - 1) * q.weights))
+    out["max_pressure"] = float(fields["pressure"].max())
+    out["min_pressure"] = float(fields["pressure"].min())
+    out["max_penetration"] = solver.max_penetration() if form.contacts_present else 0.0
+    if form.contacts_present:
+        qb = quadrature_points(form.mesh, order=4, boundary=True)
+        out["max_contact_pressure"] = float(np.max(qb(form.contact_pressure())))
+    out["edge_exclusion"] = edge_exclusion
+    out["singular_points"] = [[float(c) for c in p[:dim]] for p in singular_points]
+    if sol.message:
+        out["message"] = sol.message
+    return out

@@ -1,0 +1,239 @@
+"""The hemidisk cases and the paper's 2D studies (Figures 2-5), as runnable tasks.
+
+``run_hemidisk(case, out_dir)`` solves one case and writes ``summary.json``, ``fields.vtu``
+(ParaView), ``fields.npz`` (vertex fields for figures) and ``fields.png``. A run that stops
+early keeps the last converged state on disk, marked ``"converged": false``, and raises
+:class:`~brainbulge.errors.ConvergenceError`.
+
+Studies:
+
+- ``hemidisk-sector``: alpha x beta x {noslip, sliding} at Js = 1.2;
+- ``hemidisk-disk``: five positions of a swelling disk (Js = 1.3), sliding contact.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+from brainbulge.results.export import VertexFields, vertex_fields, write_vtu
+from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
+from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.summary import solution_summary
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
+SECTOR_BETAS = (30.0, 60.0, 90.0, 120.0)
+#: (label, disk centre x, centre y, radius) in units of R: under the opening, off-centre,
+#: deep, lateral and off-axis under a lateral opening (the paper's Figure 5 spirit)
+DISK_POSITIONS = (
+    ("top", 0.0, 0.7, 0.15),
+    ("middle", 0.0, 0.45, 0.15),
+    ("deep", 0.0, 0.2, 0.15),
+    ("lateral", 0.45, 0.5, 0.15),
+    ("far-lateral", 0.7, 0.25, 0.15),
+)
+
+
+def case_from_dict(config: dict[str, Any]) -> HemidiskCase:
+    """A :class:`HemidiskCase` from a plain dict (TOML table, CLI, study scenario)."""
+    names = {f.name for f in dataclasses.fields(HemidiskCase)}
+    unknown = set(config) - names
+    if unknown:
+        raise InputError(
+            f"unknown hemidisk option(s) {', '.join(sorted(unknown))}; "
+            f"valid: {', '.join(sorted(names))}"
+        )
+    try:
+        return HemidiskCase(**config)
+    except TypeError as err:  # pragma: no cover - wrong types in TOML
+        raise InputError(f"invalid hemidisk options: {err}") from None
+
+
+def run_hemidisk(
+    config: dict[str, Any] | HemidiskCase, out_dir: Path, progress: bool = False
+) -> dict[str, Any]:
+    """Solve one hemidisk case; write its files into ``out_dir``; return the summary."""
+    case = config if isinstance(config, HemidiskCase) else case_from_dict(dict(config))
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    problem = hemidisk_problem(case)
+    form = MixedForm(problem, element=case.element)
+    solver = NewtonSolver(form, SolverOptions(steps=case.steps, progress=progress))
+    sol = solver.solve()
+    geo = case.geometry
+    centre = np.zeros(2)
+    summary: dict[str, Any] = {
+        "case": case.name,
+        "inputs": dataclasses.asdict(case),
+        **solution_summary(
+            sol, solver, centre, geo.singular_points(), case.edge_exclusion * case.R
+        ),
+    }
+    summary["swelling_area_ratio_expected"] = _expected_area_ratio(case)
+    vf = vertex_fields(form, centre)
+    write_vtu(out_dir / "fields.vtu", vf)
+    save_vertex_fields(out_dir / "fields.npz", vf)
+    state = "" if sol.converged else f" (stopped at load {sol.load:.3f})"
+    plot_fields(vf, out_dir / "fields.png", title=f"{_label(case)}{state}")
+    atomic_write_json(out_dir / "summary.json", summary)
+    if not sol.converged:
+        raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
+    return summary
+
+
+def _expected_area_ratio(case: HemidiskCase) -> float:
+    """Added area / hemidisk area: ``alpha/pi (Js - 1)`` for a sector (MODEL.md s.1)."""
+    if case.alpha is not None:
+        return case.alpha / 180.0 * (case.swelling - 1)
+    r = case.disk[2] if case.disk else 0.0
+    return (r / case.R) ** 2 * 2 * (case.swelling - 1)
+
+
+def _label(case: HemidiskCase) -> str:
+    what = f"alpha {case.alpha:g}" if case.alpha is not None else f"disk {case.disk}"
+    return f"{what}, beta {case.beta:g}, Js {case.swelling:g}, {case.contact}"
+
+
+def save_vertex_fields(path: Path, vf: VertexFields) -> Path:
+    np.savez_compressed(
+        path,
+        points=vf.points,
+        cells=vf.cells,
+        regions=vf.regions,
+        region_names=np.array(vf.region_names),
+        **{f"point_{k}": v for k, v in vf.point_data.items()},
+    )
+    return path
+
+
+def load_vertex_fields(path: Path) -> VertexFields:
+    d = np.load(path)
+    pd = {k[6:]: d[k] for k in d.files if k.startswith("point_")}
+    return VertexFields(d["points"], d["cells"], d["regions"], list(d["region_names"]), pd, {})
+
+
+# --- studies ----------------------------------------------------------------------------
+def sector_scenarios(
+    alphas=SECTOR_ALPHAS, betas=SECTOR_BETAS, contacts=("noslip", "sliding"), **common: Any
+) -> list[dict[str, Any]]:
+    """The paper's sector sweep (Figures 2-4) as scenario dicts."""
+    return [
+        {
+            "name": f"{contact}_a{alpha:g}_b{beta:g}",
+            **common,
+            "alpha": float(alpha),
+            "beta": float(beta),
+            "contact": contact,
+            "swelling": common.get("swelling", 1.2),
+        }
+        for contact in contacts
+        for beta in betas
+        for alpha in alphas
+    ]
+
+
+def disk_scenarios(**common: Any) -> list[dict[str, Any]]:
+    """Five disk positions (Figure 5), sliding contact, Js = 1.3."""
+    return [
+        {
+            "name": f"disk_{label}",
+            **common,
+            "alpha": None,
+            "disk": [x, y, r],
+            "contact": "sliding",
+            "swelling": common.get("swelling", 1.3),
+        }
+        for label, x, y, r in DISK_POSITIONS
+    ]
+
+
+def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
+    """Runner task: one hemidisk scenario (``name`` is the folder, the rest the case)."""
+    config = {k: v for k, v in scenario.items() if k != "name"}
+    config["name"] = scenario["name"]
+    summary = run_hemidisk(config, scenario_dir)
+    return {k: v for k, v in summary.items() if k != "inputs"}
+
+
+def write_study_table(rows: list[dict[str, Any]], scenarios: list[dict], path: Path) -> Path:
+    """``table.csv``: one row per scenario with its inputs and summary keys."""
+    import csv
+
+    keys: list[str] = []
+    for r in rows:
+        for k, v in r.items():
+            if k not in keys and not isinstance(v, (list, dict)):
+                keys.append(k)
+    in_keys = [k for k in ("alpha", "beta", "contact", "swelling", "disk") if k]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(in_keys + [k for k in keys if k not in in_keys])
+        for sc, r in zip(scenarios, rows, strict=True):
+            w.writerow(
+                [
+                    json.dumps(sc.get(k)) if isinstance(sc.get(k), list) else sc.get(k)
+                    for k in in_keys
+                ]
+                + [r.get(k) for k in keys if k not in in_keys]
+            )
+    return path
+
+
+def sector_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[Path]:
+    """Grid PNGs (rows beta, columns alpha) of lambda_n and lambda_t for each contact, and
+    the side-by-side no-slip | sliding figure of the headline case."""
+    paths = []
+    done = {sc["name"] for sc, r in zip(scenarios, rows, strict=True) if r.get("complete")}
+    for contact in sorted({sc["contact"] for sc in scenarios}):
+        panels = {
+            (sc["beta"], sc["alpha"]): load_vertex_fields(out_dir / sc["name"] / "fields.npz")
+            for sc in scenarios
+            if sc["contact"] == contact and sc["name"] in done
+        }
+        if not panels:
+            continue
+        for field in ("lambda_n", "lambda_t"):
+            paths.append(
+                plot_grid(
+                    panels,
+                    field,
+                    out_dir / f"grid_{field}_{contact}.png",
+                    title=f"{field} ({contact})",
+                )
+            )
+    pairs = {}
+    for sc in scenarios:
+        if sc["name"] in done:
+            pairs.setdefault((sc["alpha"], sc["beta"]), {})[sc["contact"]] = sc["name"]
+    key = (80.0, 60.0) if (80.0, 60.0) in pairs else next(iter(pairs), None)
+    if key is not None and len(pairs[key]) == 2:
+        left = load_vertex_fields(out_dir / pairs[key]["noslip"] / "fields.npz")
+        right = load_vertex_fields(out_dir / pairs[key]["sliding"] / "fields.npz")
+        paths.append(
+            plot_side_by_side(
+                left,
+                right,
+                out_dir / "side_by_side.png",
+                title=f"alpha {key[0]:g}, beta {key[1]:g}: no-slip (left) | sliding (right)",
+            )
+        )
+    return paths
+
+
+def disk_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[Path]:
+    """lambda_n and lambda_t for the disk positions side by side."""
+    panels = [
+        (sc["name"].removeprefix("disk_"), load_vertex_fields(out_dir / sc["name"] / "fields.npz"))
+        for sc, r in zip(scenarios, rows, strict=True)
+        if r.get("complete")
+    ]
+    if not panels:
+        return []
+    return [plot_row(panels, f, out_dir / f"disk_{f}.png") for f in ("lambda_n", "lambda_t")]

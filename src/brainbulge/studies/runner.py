@@ -1,0 +1,476 @@
+"""Run many scenarios in parallel on a Dask cluster, resumably, with a progress bar.
+
+A *study* is a list of scenarios, each a plain JSON-able dict with a unique, filesystem-safe
+``"name"``. `run_study` calls ``task(scenario, scenario_dir)`` once per scenario, each in its own
+folder ``out_dir/<name>/``, and records the outcome there:
+
+``summary.json``
+    the summary dict returned by ``task`` plus ``"name"`` and ``"complete": true``; written
+    atomically, and only when ``task`` succeeded. A rerun with the same ``out_dir`` loads it
+    instead of recomputing the scenario (resume after a crash, an interruption or a failure).
+``error.json``
+    ``{"name", "complete": false, "error": "<one-line message>", "traceback"}`` when ``task``
+    raised; the study goes on with the other scenarios and retries this one on the next run.
+``scenario.json``
+    the scenario as run. If a scenario's parameters change between runs but its name does not,
+    the stale summary is not trusted and the scenario is recomputed.
+
+``out_dir/study.json`` lists every scenario with its status (``pending``, ``complete`` or
+``failed``); it is rewritten after each scenario finishes, so it also shows live progress.
+
+Where the scenarios run (``scheduler``):
+
+* ``None`` (default): a `distributed.LocalCluster` of ``n_workers`` (default 2) single-threaded
+  worker *processes*, with ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``
+  and ``NGS_NUM_THREADS`` set to 1 so that the workers do not oversubscribe the cores; closed
+  at the end. Worker processes are *spawned*: a script calling `run_study` must guard its
+  top level with ``if __name__ == "__main__":``.
+* ``"serial"``: one after the other in this process: no pickling, breakpoints and profilers work;
+  for debugging and fast tests.
+* an address such as ``"tcp://10.0.0.5:8786"``: an existing scheduler (e.g. a ``dask-jobqueue``
+  cluster on an HPC system). Only the client is closed at the end, not the cluster. Workers
+  must see ``out_dir`` at the same path (shared filesystem) and have brainbulge installed.
+
+``task`` is sent to worker processes by pickling, which stores a module-level function by
+reference (``module.function``): it must be a top-level function of a module that the
+*workers* can import, not a lambda, closure or a function defined in a notebook or ``__main__``.
+It may also be given as a string ``"package.module:function"``, resolved on the worker. Workers
+started by a `LocalCluster` inherit this process's environment (e.g. ``PYTHONPATH``) but not its
+``sys.path`` changes.
+
+>>> import tempfile
+>>> out = Path(tempfile.mkdtemp())
+>>> rows = run_study([{"name": "a", "x": 2}, {"name": "b", "x": 3}], echo_task, out,
+...                  scheduler="serial", progress=False)
+>>> [(row["name"], row["x"], row["complete"]) for row in rows]
+[('a', 2, True), ('b', 3, True)]
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import logging
+import os
+import re
+import traceback
+import uuid
+from collections.abc import Callable, Iterator, Mapping
+from datetime import UTC, datetime
+from pathlib import Path, PurePath
+from typing import Any
+
+from tqdm.auto import tqdm
+
+from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.results.run_record import atomic_write_json
+
+__all__ = ["SERIAL", "Task", "echo_task", "run_study", "validate_scenarios"]
+
+logger = logging.getLogger(__name__)
+
+#: ``scheduler`` value for in-process, one-after-the-other execution.
+SERIAL = "serial"
+
+#: ``task(scenario, scenario_dir) -> summary``, or its ``"module:function"`` path.
+Task = Callable[[dict[str, Any], Path], Mapping[str, Any]] | str
+
+#: Scenario names: start with a letter or digit, then letters, digits, ``_``, ``-``, ``.``.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
+
+#: Names that would collide with files the runner or the run record write into ``out_dir``.
+RESERVED_NAMES = frozenset(
+    {"study.json", "run.json", "run.toml", "status.json", "summary.json", "error.json"}
+)
+
+#: Environment of worker processes: one BLAS/OpenMP/MKL (pypardiso) and NGSolve
+#: ``TaskManager`` thread each, so ``n_workers`` processes use ``n_workers`` cores.
+WORKER_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "NGS_NUM_THREADS": "1",
+}
+
+SUMMARY_FILE = "summary.json"
+ERROR_FILE = "error.json"
+SCENARIO_FILE = "scenario.json"
+STUDY_FILE = "study.json"
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def echo_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
+    """Demo task: writes ``echo.json`` with the scenario and returns it as the summary.
+
+    Raises `InputError` if the scenario has ``"fail": true`` (to exercise error handling).
+    """
+    if scenario.get("fail"):
+        raise InputError(f"scenario {scenario['name']} asked to fail")
+    atomic_write_json(Path(scenario_dir) / "echo.json", _to_json(scenario))
+    return dict(scenario)
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, PurePath):
+        return str(value)
+    if isinstance(value, set | frozenset):
+        return sorted(value)
+    if hasattr(value, "tolist") and callable(value.tolist):  # numpy scalar or array
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _to_json(value: Any) -> Any:
+    """``value`` as it reads back from JSON (tuples -> lists, paths -> str, numpy -> lists)."""
+    return json.loads(json.dumps(value, default=_json_default, allow_nan=True))
+
+
+def _one_line(exc: BaseException, limit: int = 300) -> str:
+    """A one-line description of ``exc``: its own message for brainbulge errors (already
+    user-facing), ``Type: message`` otherwise."""
+    text = " ".join(str(exc).split())
+    if not isinstance(exc, BrainbulgeError):
+        text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _resolve_task(task: Task) -> Callable[[dict[str, Any], Path], Mapping[str, Any]]:
+    if callable(task):
+        return task
+    module_name, sep, attr = str(task).partition(":")
+    if not sep:
+        module_name, _, attr = str(task).rpartition(".")
+    if not module_name or not attr:
+        raise InputError(f"task {task!r} must be 'package.module:function'")
+    try:
+        func = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(f"cannot import task {task!r}: {exc}") from exc
+    if not callable(func):
+        raise InputError(f"task {task!r} is not callable")
+    return func
+
+
+def _execute(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[str, Any]:
+    """Run one scenario (on a worker); never raises for errors of ``task`` itself.
+
+    Returns ``{"ok": True, "summary": {...}}`` or ``{"ok": False, "error", "traceback"}``; the
+    summary is checked to be a JSON-able mapping here, where the failure belongs.
+    """
+    try:
+        func = _resolve_task(task)
+        summary = func(dict(scenario), Path(scenario_dir))
+        if not isinstance(summary, Mapping):
+            raise TypeError(f"task returned {type(summary).__name__}, not a dict summary")
+        return {"ok": True, "summary": _to_json(dict(summary))}
+    except Exception as exc:  # noqa: BLE001 - recorded, the study goes on
+        return {"ok": False, "error": _one_line(exc), "traceback": traceback.format_exc()}
+
+
+def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Check names (present, filesystem-safe, unique even ignoring case, not reserved) and that
+    each scenario is JSON-able; return the scenarios as JSON values. Raises `InputError`."""
+    if isinstance(scenarios, Mapping) or not isinstance(scenarios, list | tuple):
+        raise InputError("scenarios must be a list of dicts, each with a 'name'")
+    seen: dict[str, str] = {}
+    normalised = []
+    for i, scenario in enumerate(scenarios):
+        if not isinstance(scenario, Mapping):
+            raise InputError(f"scenario #{i} is a {type(scenario).__name__}, not a dict")
+        name = scenario.get("name")
+        if not isinstance(name, str) or not name:
+            raise InputError(f"scenario #{i} has no 'name'; give every scenario a unique name")
+        if not NAME_PATTERN.fullmatch(name) or name.lower() in RESERVED_NAMES:
+            raise InputError(
+                f"scenario name {name!r} is not allowed; use up to 100 letters, digits, '_', "
+                "'-' or '.', starting with a letter or digit"
+            )
+        if name.lower() in seen:
+            raise InputError(
+                f"scenario name {name!r} is used twice (as {seen[name.lower()]!r}); names must"
+                " be unique, ignoring case"
+            )
+        seen[name.lower()] = name
+        try:
+            normalised.append(_to_json(dict(scenario)))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"scenario {name!r} is not JSON-serialisable: {exc}") from exc
+    return normalised
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any]) -> dict | None:
+    """The stored summary if the scenario finished before with the same parameters."""
+    summary = _read_json(scenario_dir / SUMMARY_FILE)
+    if not isinstance(summary, dict) or summary.get("complete") is not True:
+        return None
+    stored = _read_json(scenario_dir / SCENARIO_FILE)
+    if stored is not None and stored != scenario_json:
+        logger.warning(
+            "scenario %s changed since its summary was written; recomputing it",
+            scenario_json["name"],
+        )
+        return None
+    return summary
+
+
+@contextlib.contextmanager
+def _worker_environ(env: Mapping[str, str]) -> Iterator[None]:
+    """Set ``env`` in ``os.environ`` while worker processes are spawned, then restore it.
+
+    `distributed.Nanny` reads ``OMP_NUM_THREADS`` & co. from ``os.environ`` before spawning
+    (they must be set before numpy loads BLAS); an inherited ``OMP_NUM_THREADS=8`` would win.
+    """
+    saved = {key: os.environ.get(key) for key in env}
+    os.environ.update(env)
+    try:
+        yield
+    finally:
+        for key, old in saved.items():
+            if old is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = old
+
+
+class _Study:
+    """Bookkeeping of one `run_study` call: records, statuses and ``study.json``."""
+
+    def __init__(self, scenarios: list[dict[str, Any]], out_dir: Path) -> None:
+        self.scenarios = scenarios
+        self.out_dir = out_dir
+        self.results: list[dict[str, Any] | None] = [None] * len(scenarios)
+        self.status = ["pending"] * len(scenarios)
+        self.resumed = [False] * len(scenarios)
+        self.started = datetime.now(UTC).isoformat(timespec="seconds")
+
+    def scenario_dir(self, i: int) -> Path:
+        return self.out_dir / self.scenarios[i]["name"]
+
+    def load_finished(self) -> list[int]:
+        """Load finished scenarios; prepare folders of the others; return the others."""
+        pending = []
+        for i, scenario in enumerate(self.scenarios):
+            folder = self.scenario_dir(i)
+            summary = _finished_summary(folder, scenario)
+            if summary is not None:
+                self.results[i], self.status[i], self.resumed[i] = summary, "complete", True
+                continue
+            folder.mkdir(parents=True, exist_ok=True)
+            for stale in (SUMMARY_FILE, ERROR_FILE):
+                (folder / stale).unlink(missing_ok=True)
+            atomic_write_json(folder / SCENARIO_FILE, scenario)
+            pending.append(i)
+        return pending
+
+    def record(self, i: int, outcome: dict[str, Any]) -> dict[str, Any]:
+        """Write ``summary.json`` or ``error.json`` for scenario ``i``; return its row."""
+        name = self.scenarios[i]["name"]
+        if outcome["ok"]:
+            summary = {k: v for k, v in outcome["summary"].items() if k not in ("name", "complete")}
+            row = {"name": name, **summary, "complete": True}
+            atomic_write_json(self.scenario_dir(i) / SUMMARY_FILE, row)
+            self.status[i] = "complete"
+        else:
+            row = {"name": name, "complete": False, "error": outcome["error"]}
+            atomic_write_json(
+                self.scenario_dir(i) / ERROR_FILE,
+                {**row, "traceback": outcome.get("traceback", "")},
+            )
+            self.status[i] = "failed"
+            logger.warning("scenario %s failed: %s", name, outcome["error"])
+        self.results[i] = row
+        return row
+
+    def write(self) -> Path:
+        entries = []
+        for i, scenario in enumerate(self.scenarios):
+            entry: dict[str, Any] = {"name": scenario["name"], "status": self.status[i]}
+            if self.resumed[i]:
+                entry["resumed"] = True
+            if self.status[i] == "failed":
+                entry["error"] = self.results[i]["error"]
+            entry["scenario"] = scenario
+            entries.append(entry)
+        counts = {s: self.status.count(s) for s in ("complete", "failed", "pending")}
+        return atomic_write_json(
+            self.out_dir / STUDY_FILE,
+            {
+                "n_scenarios": len(self.scenarios),
+                **{f"n_{s}": n for s, n in counts.items()},
+                "started": self.started,
+                "updated": datetime.now(UTC).isoformat(timespec="seconds"),
+                "scenarios": entries,
+            },
+        )
+
+
+# --------------------------------------------------------------------------- the runner
+
+
+def run_study(
+    scenarios: list[dict[str, Any]],
+    task: Task,
+    out_dir: Path,
+    scheduler: str | None = None,
+    n_workers: int | None = None,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Run ``task(scenario, out_dir / name)`` for every scenario; return the summaries in input
+    order.
+
+    Each returned row is the task's summary with ``"name"`` and ``"complete": True`` (as also
+    stored in ``summary.json``; a scenario completed by an earlier run is loaded, not rerun), or
+    ``{"name", "complete": False, "error": "<one-line message>"}`` for a scenario whose task
+    raised. Failures do not stop the study; check ``row["complete"]``.
+
+    Parameters
+    ----------
+    scenarios
+        JSON-able dicts, each with a unique filesystem-safe ``"name"`` (see
+        `validate_scenarios`); values are passed to ``task`` unchanged.
+    task
+        Top-level function ``task(scenario, scenario_dir) -> dict`` importable by the workers,
+        or its path ``"package.module:function"``. It writes its files into ``scenario_dir``
+        (created beforehand) and returns a JSON-able summary.
+    out_dir
+        Study folder (created if missing; see `brainbulge.results.run_record.prepare_output_dir`
+        with ``resume=True`` for CLI use).
+    scheduler
+        None: a local cluster of worker processes; ``"serial"``: in this process, one after
+        the other; otherwise the address of a running Dask scheduler.
+    n_workers
+        Worker processes of the local cluster (default 2, at most the number of scenarios to
+        run); ignored otherwise.
+    progress
+        Show a tqdm progress bar (on stderr) over finished scenarios.
+
+    Raises
+    ------
+    InputError
+        Invalid scenarios or names, an unimportable task path, or ``n_workers < 1``.
+    """
+    normalised = validate_scenarios(scenarios)
+    if n_workers is not None and n_workers < 1:
+        raise InputError(f"n_workers must be at least 1, not {n_workers}")
+    if isinstance(task, str):
+        _resolve_task(task)  # fail early, here, on a typo
+    elif not callable(task):
+        raise InputError(f"task must be a function or 'module:function', not {task!r}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    study = _Study(normalised, out_dir)
+    pending = study.load_finished()
+    study.write()
+    if len(pending) < len(scenarios):
+        logger.info(
+            "resuming: %d of %d scenarios already complete",
+            len(scenarios) - len(pending),
+            len(scenarios),
+        )
+
+    bar = tqdm(
+        total=len(scenarios),
+        initial=len(scenarios) - len(pending),
+        unit="scenario",
+        desc=f"study {out_dir.name}",
+        disable=not progress or not pending,
+    )
+    try:
+        if not pending:
+            pass
+        elif scheduler == SERIAL:
+            for i in pending:
+                outcome = _execute(task, dict(scenarios[i]), str(study.scenario_dir(i)))
+                _finish(study, bar, i, outcome)
+        else:
+            _run_distributed(study, bar, pending, scenarios, task, scheduler, n_workers)
+    finally:
+        bar.close()
+        study.write()
+    return [row if row is not None else {} for row in study.results]
+
+
+def _finish(study: _Study, bar: Any, i: int, outcome: dict[str, Any]) -> None:
+    study.record(i, outcome)
+    study.write()
+    bar.update(1)
+    n_failed = study.status.count("failed")
+    if n_failed:
+        bar.set_postfix(failed=n_failed)
+
+
+def _run_distributed(
+    study: _Study,
+    bar: Any,
+    pending: list[int],
+    scenarios: list[dict[str, Any]],
+    task: Task,
+    scheduler: str | None,
+    n_workers: int | None,
+) -> None:
+    """Submit the pending scenarios to a Dask cluster and record them as they finish."""
+    import importlib.util
+
+    from distributed import Client, LocalCluster, as_completed
+
+    with contextlib.ExitStack() as stack:
+        if scheduler is None:
+            workers = min(n_workers or 2, len(pending))
+            dashboard = ":0" if importlib.util.find_spec("bokeh") else None
+            with _worker_environ(WORKER_ENV):
+                cluster = stack.enter_context(
+                    LocalCluster(
+                        n_workers=workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=dashboard,
+                        env=dict(WORKER_ENV),
+                    )
+                )
+            client = stack.enter_context(Client(cluster, set_as_default=False))
+            if dashboard:
+                logger.info("Dask dashboard: %s", client.dashboard_link)
+        else:
+            try:
+                client = stack.enter_context(Client(scheduler, set_as_default=False))
+            except OSError as exc:
+                raise InputError(
+                    f"cannot connect to Dask scheduler {scheduler}: {_one_line(exc)}"
+                ) from exc
+
+        index: dict[Any, int] = {}
+        futures = []
+        for i in pending:
+            future = client.submit(
+                _execute,
+                task,
+                dict(scenarios[i]),
+                str(study.scenario_dir(i)),
+                key=f"scenario-{study.scenarios[i]['name']}-{uuid.uuid4().hex[:8]}",
+                pure=False,
+            )
+            index[future.key] = i
+            futures.append(future)
+        for future in as_completed(futures, loop=client.loop):
+            i = index[future.key]
+            try:
+                outcome = future.result()
+            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the worker died
+                outcome = {
+                    "ok": False,
+                    "error": _one_line(exc),
+                    "traceback": "".join(traceback.format_exception(exc)),
+                }
+            future.release()
+            _finish(study, bar, i, outcome)
