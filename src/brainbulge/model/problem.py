@@ -95,4 +95,20 @@ class Problem:
         taken += [c.boundary for c in self.contacts]
         taken += list(self.displacements)
         pats = [re.compile(f"^(?:{p})$") for p in taken if p]
-        return [b for b in self.boundary_names() if not any(p.match(b) for p in pats)]
+        outer = outer_boundary_names(self.mesh)
+        return [b for b in outer if not any(p.match(b) for p in pats)]
+
+
+def outer_boundary_names(mesh: ngs.Mesh) -> list[str]:
+    """Names of boundary parts on the outer surface (internal interfaces, which netgen
+    also lists as boundaries when regions are glued, are left out)."""
+    names = mesh.GetBoundaries()
+    found: set[str] = set()
+    for el in mesh.Elements(ngs.BND):
+        name = names[el.index]
+        if name in found:
+            continue
+        facet = el.edges[0] if mesh.dim == 2 else el.faces[0]
+        if len(mesh[facet].elements) == 1:
+            found.add(name)
+    return sorted(found)

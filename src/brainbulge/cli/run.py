@@ -1,0 +1,49 @@
+"""``brainbulge run CASE.toml``: any command described by a TOML file.
+
+The file has the shape of the ``run.toml`` every output folder holds, so a run is repeated
+with ``brainbulge run OUT/run.toml --out NEW``::
+
+    command = "hemidisk"
+    [hemidisk]
+    alpha = 80.0
+    beta = 60.0
+    contact = "sliding"
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from brainbulge.cli import add_output_options
+from brainbulge.errors import InputError
+
+COMMANDS = ("hemidisk",)
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("run", help="run a case described by a TOML file", description=__doc__)
+    p.add_argument("config", type=Path, help="TOML file (e.g. a previous run.toml)")
+    add_output_options(p, "run-out")
+    p.set_defaults(func=run_command)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    from brainbulge.results.run_record import load_config
+
+    config = load_config(args.config)
+    command = config.get("command")
+    if command not in COMMANDS:
+        raise InputError(
+            f"{args.config}: 'command' must be one of {', '.join(COMMANDS)}, got {command!r}"
+        )
+    table = config.get(command)
+    if not isinstance(table, dict):
+        raise InputError(f"{args.config}: missing table [{command}] with the case's options")
+    from brainbulge.cli.hemidisk import run_case
+    from brainbulge.studies.hemidisk import case_from_dict
+
+    case = case_from_dict(table)
+    case.geometry  # noqa: B018 - validate before creating --out
+    return run_case(args, case)
