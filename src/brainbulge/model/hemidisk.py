@@ -44,7 +44,7 @@ class HemidiskCase:
     material: str = "paper"
     tissue: str = "gray"
     skull_thickness: float = 0.2
-    skull_edge_radius: float = 0.02
+    skull_edge_radius: float = 0.05
     edge_exclusion: float = 0.05
     name: str = "hemidisk"
     extra: dict = field(default_factory=dict)

@@ -1,0 +1,185 @@
+"""The outer surface of the brain mesh: fixed base, sliding skull contact and craniectomy flaps.
+
+Faces of the outer surface whose centroid lies below the cut plane ``z = base_z_mm`` (world RAS,
+mm; default about foramen-magnum level) are the fixed ``base``; the rest slides on the ``skull``
+except on a flap, where the skull is removed. A :class:`Flap` is the part of the skull inside a
+cylinder along the outward normal at the flap centre, of circular (``half_length_mm = 0``) or
+stadium cross-section (a disk of ``radius_mm`` swept over ``2 half_length_mm`` along
+``long_axis``): the rigid-skull obstacle (:mod:`.skull`) uses the same cylinder as its cutter,
+so the traction-free faces and the opening in the obstacle agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brainbulge.errors import InputError
+from brainbulge.geometry.brain.envelope import IntracranialEnvelope
+
+# outward faces of a positively oriented tet (a, b, c, d): opposite d, c, b, a
+_TET_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+#: Directions (RAS) from the brain centre to the centres of the named flaps.
+LEFT_FTP_DIRECTION = (-1.0, 0.1, 0.45)
+FRONTAL_DIRECTION = (0.0, 1.0, 0.55)
+#: Unilateral fronto-temporo-parietal flap diameter (mm), clinical guideline ~12 cm.
+UNILATERAL_DIAMETER_MM = 120.0
+#: Bifrontal flap antero-posterior extent (mm); its width is set by the area ratio.
+FRONTAL_AP_DIAMETER_MM = 120.0
+#: Depth (mm, below the frontal centre along its axis) down to which the bifrontal flap cuts,
+#: so that its lateral ends reach the temporal squama.
+FRONTAL_DEPTH_MM = 120.0
+#: The bifrontal flap's lower edge: this fraction of the height above the lowest point
+#: (z = -19 mm in MNI space, above the orbital roofs).
+FRONTAL_FLOOR_FRACTION = 0.35
+
+
+def boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (k, 3) of the outer surface, outward oriented, and the tet each belongs to."""
+    faces = tets[:, _TET_FACES].reshape(-1, 3)
+    key = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    outer = counts[inverse.ravel()] == 1
+    owner = np.repeat(np.arange(len(tets)), 4)
+    return faces[outer], owner[outer]
+
+
+def face_areas_mm2(nodes: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Triangle areas (mm^2)."""
+    p = nodes[faces]
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+@dataclass(frozen=True)
+class Flap:
+    """A craniectomy: the skull removed inside a cylinder through ``centre_mm`` along ``axis``.
+
+    ``axis`` is the outward normal at the centre; the cross-section is a disk of ``radius_mm``
+    swept over ``[-half_length_mm, half_length_mm]`` along ``long_axis`` (perpendicular to the
+    axis). Only the skull within ``depth_mm`` below the centre (default ``radius_mm``) is cut.
+    """
+
+    name: str
+    centre_mm: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    radius_mm: float
+    half_length_mm: float = 0.0
+    long_axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    depth_mm: float | None = None
+    floor_z_mm: float | None = None
+    meta: dict = field(default_factory=dict, compare=False)
+
+    def cutter_distance(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance (mm, negative inside) to the cutting cylinder, and its gradient."""
+        a = np.asarray(self.axis, float)
+        e = np.asarray(self.long_axis, float)
+        e = e - (e @ a) * a
+        e /= np.linalg.norm(e)
+        rel = points_mm - np.asarray(self.centre_mm)
+        axial = rel @ a
+        perp = rel - axial[:, None] * a
+        along = np.clip(perp @ e, -self.half_length_mm, self.half_length_mm)
+        off = perp - along[:, None] * e
+        dist = np.linalg.norm(off, axis=1)
+        radial_dir = off / np.maximum(dist, 1e-12)[:, None]
+        depth = self.radius_mm if self.depth_mm is None else self.depth_mm
+        # intersection of the infinite cylinder (dist < R), the half-space axial > -depth and,
+        # with a floor, z > floor: exact outside a corner, max of the distances inside
+        columns = [dist - self.radius_mm, -(axial + depth)]
+        grads = [radial_dir, -np.broadcast_to(a, radial_dir.shape)]
+        if self.floor_z_mm is not None:
+            columns.append(self.floor_z_mm - points_mm[:, 2])
+            grads.append(np.broadcast_to(np.array([0.0, 0.0, -1.0]), radial_dir.shape))
+        w = np.stack(columns, axis=1)
+        wpos = np.maximum(w, 0.0)
+        outside = np.linalg.norm(wpos, axis=1)
+        phi = outside + np.minimum(w.max(axis=1), 0.0)
+        inside = outside == 0
+        nearest = np.eye(w.shape[1])[np.argmax(w, axis=1)]
+        weight = np.where(inside[:, None], nearest, wpos / np.maximum(outside, 1e-12)[:, None])
+        grad = np.einsum("nk,knd->nd", weight, np.stack(grads))
+        return phi, grad
+
+    def contains(self, points_mm: np.ndarray) -> np.ndarray:
+        """True for points inside the cutting cylinder."""
+        return self.cutter_distance(points_mm)[0] < 0
+
+    @property
+    def diameter_mm(self) -> float:
+        """Short diameter of the opening (mm)."""
+        return 2 * self.radius_mm
+
+
+def _surface_normal(envelope: IntracranialEnvelope, point_mm: np.ndarray) -> np.ndarray:
+    h = 1.0
+    phi = [envelope_phi(envelope, point_mm + h * np.eye(3)[i]) -
+           envelope_phi(envelope, point_mm - h * np.eye(3)[i]) for i in range(3)]
+    n = np.array(phi)
+    return n / np.linalg.norm(n)
+
+
+def envelope_phi(envelope: IntracranialEnvelope, point_mm: np.ndarray) -> float:
+    """Envelope signed distance (mm) at one point (trilinear)."""
+    import scipy.ndimage as ndi
+
+    ijk = envelope.world_to_index(np.atleast_2d(point_mm))
+    return float(ndi.map_coordinates(envelope.sdf_mm, ijk.T, order=1, mode="nearest")[0])
+
+
+def custom_flap(envelope: IntracranialEnvelope, centre_mm: tuple[float, float, float],
+                diameter_mm: float, name: str = "custom") -> Flap:
+    """A circular flap of ``diameter_mm`` centred where the ray from the brain centre through
+    ``centre_mm`` meets the skull (so the centre need only be near the skull)."""
+    if not 10.0 <= diameter_mm <= 250.0:
+        raise InputError(f"flap diameter {diameter_mm} mm is outside 10-250 mm: give it in mm")
+    direction = np.asarray(centre_mm, float) - envelope.centre_mm()
+    if np.linalg.norm(direction) < 1e-6:
+        raise InputError("flap centre is the brain centre: give a point on the skull (mm)")
+    centre = envelope.surface_point_along(direction)
+    axis = _surface_normal(envelope, centre)
+    return Flap(name, tuple(centre.tolist()), tuple(axis.tolist()), diameter_mm / 2)
+
+
+def unilateral_flap(envelope: IntracranialEnvelope, side: str,
+                    diameter_mm: float = UNILATERAL_DIAMETER_MM) -> Flap:
+    """Fronto-temporo-parietal flap over the ``"left"`` or ``"right"`` hemisphere."""
+    d = np.array(LEFT_FTP_DIRECTION)
+    if side == "right":
+        d[0] = -d[0]
+    elif side != "left":
+        raise InputError(f"side must be 'left' or 'right', got {side!r}")
+    return custom_flap(envelope, envelope.centre_mm() + d, diameter_mm, name=side)
+
+
+def frontal_flap(envelope: IntracranialEnvelope, nodes: np.ndarray, faces: np.ndarray,
+                 allowed: np.ndarray, area_ratio: float = 2.0,
+                 ap_diameter_mm: float = FRONTAL_AP_DIAMETER_MM,
+                 floor_z_mm: float | None = None) -> Flap:
+    """Bifrontal flap: a stadium over both frontal lobes above ``floor_z_mm`` (default: 35 %
+    of the height above the lowest point, sparing the orbital roofs), widened until its area
+    on the surface is ``area_ratio`` times that of the left unilateral flap (faces in
+    ``allowed`` only)."""
+    z = nodes[:, 2]
+    if floor_z_mm is None:
+        floor_z_mm = float(z.min() + FRONTAL_FLOOR_FRACTION * (z.max() - z.min()))
+    base = custom_flap(envelope, envelope.centre_mm() + np.array(FRONTAL_DIRECTION),
+                       ap_diameter_mm, name="frontal")
+    areas = face_areas_mm2(nodes, faces)
+    centroids = nodes[faces].mean(axis=1)
+    left = unilateral_flap(envelope, "left")
+    target = area_ratio * areas[allowed & left.contains(centroids)].sum()
+
+    def flap(half_length: float) -> Flap:
+        return Flap("frontal", base.centre_mm, base.axis, base.radius_mm, half_length,
+                    (1.0, 0.0, 0.0), depth_mm=FRONTAL_DEPTH_MM, floor_z_mm=floor_z_mm)
+
+    lo, hi = 0.0, 200.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if areas[allowed & flap(mid).contains(centroids)].sum() < target:
+            lo = mid
+        else:
+            hi = mid
+    return flap(0.5 * (lo + hi))

@@ -1,0 +1,237 @@
+"""The labelled brain mesh and the pipeline that builds it from a tissue image.
+
+``build_brain_mesh`` runs: tissue image -> (optional scaling to a brain volume) -> intracranial
+envelope (skull's inner surface) -> Netgen tetrahedra -> tissue and hemisphere tags -> outer
+surface with base, skull and flaps. All lengths are world millimetres (RAS+), volumes ml.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brainbulge.errors import InputError, MeshError
+from brainbulge.geometry.brain.boundaries import (
+    UNILATERAL_DIAMETER_MM,
+    Flap,
+    boundary_faces,
+    custom_flap,
+    face_areas_mm2,
+    frontal_flap,
+    unilateral_flap,
+)
+from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
+from brainbulge.geometry.brain.labels import TISSUES, TissueImage
+from brainbulge.geometry.brain.quality import quality_stats
+from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane, tag_tissue
+from brainbulge.geometry.brain.skull import RigidSkull
+from brainbulge.geometry.brain.tetmesh import (
+    element_size_for,
+    mesh_intracranial_volume,
+    tet_volumes_mm3,
+)
+
+#: Fraction of the envelope's inferior-superior extent below the default base cut plane:
+#: 0.12 puts it at z = -54 mm in MNI space, about the foramen magnum.
+BASE_FRACTION = 0.12
+
+
+@dataclass
+class BrainMesh:
+    """Labelled tetrahedral brain mesh with its outer-surface boundaries (mm, ml).
+
+    ``tissue``: per-tet code (see :data:`labels.TISSUES`); ``side``: 0 left, 1 right;
+    ``faces``: outer-surface triangles (outward); ``face_tet``: the tet owning each face;
+    ``base``: mask of faces below the cut plane ``base_z_mm``; ``flaps``: named flaps and
+    ``flap_faces`` their face masks (base faces excluded); ``voxel_volumes_ml``: tissue volumes
+    counted in the image (CSF includes the layer under the skull).
+    """
+
+    nodes_mm: np.ndarray
+    tets: np.ndarray
+    tissue: np.ndarray
+    side: np.ndarray
+    faces: np.ndarray
+    face_tet: np.ndarray
+    base: np.ndarray
+    base_z_mm: float
+    envelope: IntracranialEnvelope
+    flaps: dict[str, Flap] = field(default_factory=dict)
+    flap_faces: dict[str, np.ndarray] = field(default_factory=dict)
+    voxel_volumes_ml: dict[str, float] = field(default_factory=dict)
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    def tet_volumes_mm3(self) -> np.ndarray:
+        """Volume of each tet (mm^3)."""
+        return tet_volumes_mm3(self.nodes_mm, self.tets)
+
+    def tissue_volumes_ml(self) -> dict[str, float]:
+        """Mesh volume of each tissue (ml)."""
+        vol = self.tet_volumes_mm3()
+        return {n: float(vol[self.tissue == c].sum() / 1000) for c, n in TISSUES.items()}
+
+    def material_names(self) -> np.ndarray:
+        """``"{tissue}_{side}"`` for each tet."""
+        names = np.array([f"{TISSUES.get(c, 'none')}_{SIDES[s]}" for c in range(6)
+                          for s in (0, 1)])
+        return names[2 * self.tissue.astype(int) + self.side.astype(int)]
+
+    def region_volumes_ml(self) -> dict[str, float]:
+        """Mesh volume of each ``"{tissue}_{side}"`` region present (ml)."""
+        vol = self.tet_volumes_mm3()
+        names = self.material_names()
+        return {str(n): float(vol[names == n].sum() / 1000) for n in np.unique(names)}
+
+    def flap_area_cm2(self, name: str) -> float:
+        """Area of a flap on the outer surface (cm^2)."""
+        area = face_areas_mm2(self.nodes_mm, self.faces)
+        return float(area[self.flap_faces[name]].sum() / 100)
+
+    def boundary_names(self, flap: str | None = None) -> np.ndarray:
+        """``"base"``, ``"skull"`` or ``"flap"`` for each outer face, for the given flap."""
+        names = np.where(self.base, "base", "skull").astype("<U5")
+        if flap is not None:
+            names[self._flap_mask(flap)] = "flap"
+        return names
+
+    def _flap_mask(self, flap: str) -> np.ndarray:
+        if flap not in self.flap_faces:
+            raise InputError(f"unknown flap {flap!r}: choose one of {sorted(self.flap_faces)}")
+        return self.flap_faces[flap]
+
+    def add_flap(self, flap: Flap) -> None:
+        """Register a flap and tag its faces (centroid inside the cutter, base excluded)."""
+        centroids = self.nodes_mm[self.faces].mean(axis=1)
+        mask = _component_nearest(self.faces, flap.contains(centroids) & ~self.base,
+                                  centroids, np.asarray(flap.centre_mm))
+        if not mask.any():
+            raise InputError(f"flap {flap.name!r} covers no face of the skull surface: move its "
+                             "centre onto the skull or enlarge it")
+        self.flaps[flap.name] = flap
+        self.flap_faces[flap.name] = mask
+
+    def skull(self, flap: str | None = None, edge_radius_mm: float = 3.0) -> RigidSkull:
+        """Rigid-skull obstacle with the given flap removed (``None``: intact skull)."""
+        return RigidSkull(self.envelope, None if flap is None else self.flaps[flap],
+                          edge_radius_mm)
+
+    def quality(self) -> dict[str, float | int]:
+        """Element quality summary (see :func:`quality.quality_stats`)."""
+        return quality_stats(self.nodes_mm, self.tets)
+
+
+def build_brain_mesh(
+    image: TissueImage | None = None,
+    target_tets: int = 100_000,
+    brain_volume_ml: float | None = None,
+    csf_layer_mm: float = 1.5,
+    base_z_mm: float | None = None,
+    midsagittal: MidSagittalPlane | None = None,
+    custom_flap_centre_mm: tuple[float, float, float] | None = None,
+    custom_flap_diameter_mm: float = UNILATERAL_DIAMETER_MM,
+    frontal_area_ratio: float = 2.0,
+) -> BrainMesh:
+    """Build the labelled brain mesh (see module docstring).
+
+    ``image``: tissue labels (default: the ICBM152 template); ``target_tets``: about how many
+    tetrahedra; ``brain_volume_ml``: scale the geometry so that the intracranial volume (all
+    meshed tissue incl. CSF) is this (the paper: 1108 ml); ``csf_layer_mm``: CSF between brain
+    and skull; ``base_z_mm``: cut plane of the fixed base (default: 12 % of the height above the
+    lowest point); ``midsagittal``: the left/right plane (default x = 0 for the template, else
+    through the brain centroid). Flaps ``frontal``, ``left``, ``right`` are always made, and
+    ``custom`` when its centre is given.
+    """
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if image is None:
+        from brainbulge.geometry.brain.template import icbm152_tissue_image
+
+        image = icbm152_tissue_image()
+        midsagittal = midsagittal or MidSagittalPlane()
+    midsagittal = midsagittal or MidSagittalPlane.through_centroid(image)
+    if not 1_000 <= target_tets <= 20_000_000:
+        raise InputError(f"target_tets = {target_tets} is outside 1e3-2e7: ask for e.g. 100000")
+    envelope = intracranial_envelope(image, csf_layer_mm=csf_layer_mm)
+    if brain_volume_ml is not None:
+        if not 50.0 <= brain_volume_ml <= 5000.0:
+            raise InputError(f"brain volume {brain_volume_ml} ml is outside 50-5000 ml")
+        factor = (brain_volume_ml / envelope.volume_ml()) ** (1 / 3)
+        centre = envelope.centre_mm()
+        image = image.scaled_about(factor, centre)
+        envelope = IntracranialEnvelope(envelope.sdf_mm * np.float32(factor),
+                                        _scale_affine(envelope.affine, factor, centre))
+        midsagittal = MidSagittalPlane(
+            tuple((centre + factor * (np.asarray(midsagittal.point_mm) - centre)).tolist()),
+            midsagittal.normal)
+    timings["envelope"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    h_mm = element_size_for(envelope.volume_ml(), target_tets)
+    nodes, tets = mesh_intracranial_volume(envelope, h_mm)
+    timings["tetmesh"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    tissue = tag_tissue(image, nodes, tets, intracranial_volume_ml=envelope.volume_ml(),
+                        plane=midsagittal)
+    side = midsagittal.side(nodes[tets].mean(axis=1))
+    faces, face_tet = boundary_faces(tets)
+    z = nodes[:, 2]
+    if base_z_mm is None:
+        base_z_mm = float(z.min() + BASE_FRACTION * (z.max() - z.min()))
+    base = nodes[faces][:, :, 2].mean(axis=1) < base_z_mm
+    voxel = image.volumes_ml()
+    voxel["csf"] = envelope.volume_ml() - sum(v for k, v in voxel.items() if k != "csf")
+    mesh = BrainMesh(nodes, tets, tissue, side.astype(np.int8), faces, face_tet, base,
+                     float(base_z_mm), envelope, voxel_volumes_ml=voxel)
+    for s in ("left", "right"):
+        mesh.add_flap(unilateral_flap(envelope, s))
+    mesh.add_flap(frontal_flap(envelope, nodes, faces, ~base, frontal_area_ratio))
+    if custom_flap_centre_mm is not None:
+        mesh.add_flap(custom_flap(envelope, custom_flap_centre_mm, custom_flap_diameter_mm))
+    timings["tags"] = time.perf_counter() - t0
+    mesh.timings_s = timings
+    check_brain_mesh(mesh)
+    return mesh
+
+
+def _component_nearest(faces: np.ndarray, mask: np.ndarray, centroids: np.ndarray,
+                       point_mm: np.ndarray) -> np.ndarray:
+    """The edge-connected part of the face set ``mask`` that is nearest to ``point_mm``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    idx = np.flatnonzero(mask)
+    if len(idx) == 0:
+        return mask
+    sub = faces[idx]
+    edges = np.sort(np.concatenate([sub[:, [0, 1]], sub[:, [1, 2]], sub[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(idx)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    e, o = edges[order], owner[order]
+    same = np.all(e[1:] == e[:-1], axis=1)
+    graph = coo_matrix((np.ones(same.sum()), (o[:-1][same], o[1:][same])),
+                       shape=(len(idx), len(idx)))
+    _, comp = connected_components(graph, directed=False)
+    nearest = np.argmin(np.linalg.norm(centroids[idx] - point_mm, axis=1))
+    out = np.zeros_like(mask)
+    out[idx[comp == comp[nearest]]] = True
+    return out
+
+
+def _scale_affine(affine: np.ndarray, factor: float, centre_mm: np.ndarray) -> np.ndarray:
+    scale = np.eye(4)
+    scale[:3, :3] *= factor
+    scale[:3, 3] = centre_mm * (1 - factor)
+    return scale @ affine
+
+
+def check_brain_mesh(mesh: BrainMesh) -> None:
+    """Raise :class:`MeshError` for inverted or degenerate tets or an empty gray/white region."""
+    vol = mesh.tet_volumes_mm3()
+    if np.any(vol <= 1e-9):
+        raise MeshError(f"{int((vol <= 1e-9).sum())} inverted or degenerate tetrahedra")
+    for code in (1, 2):
+        if not np.any(mesh.tissue == code):
+            raise MeshError(f"region {TISSUES[code]!r} has no element: ask for more tets")

@@ -1,0 +1,138 @@
+"""Writing and reading brain meshes: VTU/XDMF (meshio), a fast ``.npz`` and ``mesh.json``."""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from brainbulge.errors import InputError
+from brainbulge.geometry.brain.boundaries import Flap
+from brainbulge.geometry.brain.brain_mesh import BrainMesh
+from brainbulge.geometry.brain.envelope import IntracranialEnvelope
+from brainbulge.geometry.brain.labels import TISSUES
+from brainbulge.geometry.brain.regions import SIDES
+
+log = logging.getLogger("brainbulge")
+
+#: Boundary codes in the VTU/XDMF files (cell data ``boundary`` on triangles).
+BOUNDARY_CODES = {"base": 1, "skull": 2, "flap": 3}
+
+
+def brain_summary(mesh: BrainMesh) -> dict:
+    """The content of ``mesh.json``: sizes, volumes (ml), quality, flap areas (cm^2)."""
+    mesh_vol = mesh.tissue_volumes_ml()
+    return {
+        "units": {"length": "mm", "volume": "ml", "area": "cm^2"},
+        "nodes": int(len(mesh.nodes_mm)),
+        "tets": int(len(mesh.tets)),
+        "boundary_faces": int(len(mesh.faces)),
+        "tissue_codes": {str(k): v for k, v in TISSUES.items()},
+        "side_codes": {str(k): v for k, v in SIDES.items()},
+        "intracranial_volume_ml": {"mesh": float(mesh.tet_volumes_mm3().sum() / 1000),
+                                   "voxels": mesh.envelope.volume_ml()},
+        "tissue_volumes_ml": {
+            name: {"mesh": mesh_vol[name], "voxels": float(mesh.voxel_volumes_ml.get(name, 0.0)),
+                   "relative_difference": (mesh_vol[name] / mesh.voxel_volumes_ml[name] - 1)
+                   if mesh.voxel_volumes_ml.get(name, 0.0) > 0 else None}
+            for name in TISSUES.values()
+        },
+        "region_volumes_ml": mesh.region_volumes_ml(),
+        "quality": mesh.quality(),
+        "base": {"cut_plane_z_mm": mesh.base_z_mm, "faces": int(mesh.base.sum()),
+                 "area_cm2": float(_area(mesh, mesh.base))},
+        "flaps": {name: {"area_cm2": mesh.flap_area_cm2(name), "faces":
+                         int(mesh.flap_faces[name].sum()), **_flap_dict(f)}
+                  for name, f in mesh.flaps.items()},
+        "timings_s": mesh.timings_s,
+    }
+
+
+def _area(mesh: BrainMesh, mask: np.ndarray) -> float:
+    from brainbulge.geometry.brain.boundaries import face_areas_mm2
+
+    return float(face_areas_mm2(mesh.nodes_mm, mesh.faces)[mask].sum() / 100)
+
+
+def _flap_dict(flap: Flap) -> dict:
+    d = asdict(flap)
+    d.pop("meta")
+    return d
+
+
+def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = None,
+                    figures: bool = True) -> dict[str, Path]:
+    """Write ``brain.vtu``, ``brain.xdmf`` (+ ``.h5``), ``brain.npz``, ``mesh.json`` and, with
+    ``figures``, ``sections.png`` and ``boundaries.png`` into ``out_dir``. The VTU/XDMF
+    boundary codes (1 base, 2 skull, 3 flap) use ``flap`` (default: none)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = mesh.boundary_names(flap)
+    bcode = np.array([BOUNDARY_CODES[n] for n in names], dtype=np.int32)
+    region = (2 * mesh.tissue.astype(np.int32) + mesh.side).astype(np.int32)
+    mm = meshio.Mesh(
+        mesh.nodes_mm,
+        [("tetra", mesh.tets.astype(np.int64)), ("triangle", mesh.faces.astype(np.int64))],
+        cell_data={
+            "tissue": [mesh.tissue.astype(np.int32), np.zeros(len(mesh.faces), np.int32)],
+            "side": [mesh.side.astype(np.int32), np.zeros(len(mesh.faces), np.int32)],
+            "region": [region, np.zeros(len(mesh.faces), np.int32)],
+            "boundary": [np.zeros(len(mesh.tets), np.int32), bcode],
+        },
+    )
+    paths = {"vtu": out / "brain.vtu", "xdmf": out / "brain.xdmf", "npz": out / "brain.npz",
+             "json": out / "mesh.json"}
+    mm.write(paths["vtu"])
+    try:  # meshio's XDMF writer needs h5py (heavy data in brain.h5)
+        import h5py  # noqa: F401
+    except ImportError:
+        log.warning("h5py is not installed: brain.xdmf not written (pip install h5py)")
+        paths.pop("xdmf")
+    else:
+        mm.write(paths["xdmf"])
+    env = mesh.envelope
+    np.savez(
+        paths["npz"], nodes_mm=mesh.nodes_mm, tets=mesh.tets, tissue=mesh.tissue,
+        side=mesh.side, faces=mesh.faces, face_tet=mesh.face_tet, base=mesh.base,
+        base_z_mm=mesh.base_z_mm, envelope_sdf_mm=env.sdf_mm, envelope_affine=env.affine,
+        flaps_json=json.dumps({n: _flap_dict(f) for n, f in mesh.flaps.items()}),
+        voxel_volumes_json=json.dumps(mesh.voxel_volumes_ml),
+    )
+    summary = brain_summary(mesh)
+    paths["json"].write_text(json.dumps(summary, indent=2, default=_json_default))
+    if figures:
+        from brainbulge.geometry.brain.figures import plot_boundaries, plot_sections
+
+        paths["sections"] = plot_sections(mesh, out / "sections.png")
+        paths["boundaries"] = plot_boundaries(mesh, out / "boundaries.png")
+    return paths
+
+
+def _json_default(o: object) -> object:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o))
+
+
+def load_brain_mesh(path: str | Path) -> BrainMesh:
+    """Read a ``brain.npz`` written by :func:`save_brain_mesh` (a second or two)."""
+    try:
+        d = np.load(path)
+    except (OSError, ValueError) as err:
+        raise InputError(f"cannot read brain mesh {path}: {err}; give a brain.npz") from None
+    mesh = BrainMesh(
+        d["nodes_mm"], d["tets"], d["tissue"], d["side"], d["faces"], d["face_tet"],
+        d["base"], float(d["base_z_mm"]),
+        IntracranialEnvelope(d["envelope_sdf_mm"], d["envelope_affine"]),
+        voxel_volumes_ml=json.loads(str(d["voxel_volumes_json"])),
+    )
+    for f in json.loads(str(d["flaps_json"])).values():
+        f = {k: tuple(v) if isinstance(v, list) else v for k, v in f.items()}
+        mesh.add_flap(Flap(**f))
+    return mesh

@@ -1,0 +1,90 @@
+"""The default brain: the ICBM152 template meshed at a coarse size (~40 s)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brainbulge.geometry.brain import TISSUES, build_brain_mesh, to_ngsolve
+
+
+@pytest.fixture(scope="module")
+def icbm_mesh():
+    return build_brain_mesh(target_tets=30_000)
+
+
+def test_region_volumes_match_voxels(icbm_mesh) -> None:
+    mesh_vol = icbm_mesh.tissue_volumes_ml()
+    for name in TISSUES.values():
+        assert mesh_vol[name] == pytest.approx(icbm_mesh.voxel_volumes_ml[name], rel=0.02), name
+    # the template's brain mask is ~1.88 l; with the cisterns and the CSF layer ~2.0 l
+    assert 1850 < sum(mesh_vol.values()) < 2150
+    assert set(icbm_mesh.region_volumes_ml()) == {
+        f"{t}_{s}" for t in TISSUES.values() for s in ("left", "right")}
+
+
+def test_quality(icbm_mesh) -> None:
+    q = icbm_mesh.quality()
+    assert q["inverted_tets"] == 0
+    assert q["min_dihedral_deg"] >= 10.0
+    assert 15_000 < q["tets"] < 50_000
+
+
+def test_cerebellum_and_brainstem_sit_where_they_should(icbm_mesh) -> None:
+    c = icbm_mesh.nodes_mm[icbm_mesh.tets].mean(axis=1)
+    cb = c[icbm_mesh.tissue == 4].mean(axis=0)
+    bs = c[icbm_mesh.tissue == 5].mean(axis=0)
+    assert cb[1] < -45 and cb[2] < -20  # posterior fossa (MNI mm)
+    assert abs(bs[0]) < 5 and bs[1] > cb[1] and bs[2] < -15
+
+
+def test_base_only_below_the_cut_plane(icbm_mesh) -> None:
+    m = icbm_mesh
+    zc = m.nodes_mm[m.faces][:, :, 2].mean(axis=1)
+    assert -65 < m.base_z_mm < -45  # about foramen magnum level in MNI space
+    assert m.base.any() and np.all(zc[m.base] < m.base_z_mm)
+    assert not np.any(zc[~m.base] < m.base_z_mm)
+
+
+def test_flap_areas(icbm_mesh) -> None:
+    m = icbm_mesh
+    left, right, frontal = (m.flap_area_cm2(n) for n in ("left", "right", "frontal"))
+    assert 110 < left < 170  # a 12 cm opening on a curved skull
+    assert right == pytest.approx(left, rel=0.05)
+    assert frontal / left == pytest.approx(2.0, rel=0.05)
+    zc = m.nodes_mm[m.faces][:, :, :].mean(axis=1)
+    assert zc[m.flap_faces["left"], 0].max() < 10 and zc[m.flap_faces["right"], 0].min() > -10
+    assert zc[m.flap_faces["frontal"], 1].mean() > 20
+
+
+def test_ngsolve_mesh_of_the_template(icbm_mesh) -> None:
+    import ngsolve as ngs
+
+    mesh = to_ngsolve(icbm_mesh, flap="frontal")
+    vol = icbm_mesh.region_volumes_ml()["white_left"]
+    assert ngs.Integrate(1, mesh, definedon=mesh.Materials("white_left")) / 1000 == (
+        pytest.approx(vol, rel=1e-9))
+    flap = ngs.Integrate(1, mesh, ngs.BND, definedon=mesh.Boundaries("flap")) / 100
+    assert flap == pytest.approx(icbm_mesh.flap_area_cm2("frontal"), rel=1e-9)
+
+
+def test_skull_obstacle_is_open_over_the_flap(icbm_mesh) -> None:
+    skull = icbm_mesh.skull("left", edge_radius_mm=3.0)
+    flap = icbm_mesh.flaps["left"]
+    out = np.asarray(flap.centre_mm) + 10 * np.asarray(flap.axis)
+    assert skull.signed_distance(out[None])[0][0] < 0
+    intact = icbm_mesh.skull(None)
+    assert intact.signed_distance(out[None])[0][0] == pytest.approx(10.0, abs=0.5)
+
+
+@pytest.mark.slow
+def test_paper_sized_mesh_quality_and_volumes() -> None:
+    """Paper-sized mesh (the paper: 1.28M tets for 1108 ml): here ~400k tets of the template."""
+    mesh = build_brain_mesh(target_tets=400_000, brain_volume_ml=1108.0)
+    q = mesh.quality()
+    assert q["inverted_tets"] == 0 and q["min_dihedral_deg"] >= 10.0
+    assert 300_000 < q["tets"] < 550_000
+    assert mesh.tet_volumes_mm3().sum() / 1000 == pytest.approx(1108.0, rel=0.01)
+    vols = mesh.tissue_volumes_ml()
+    for name in TISSUES.values():
+        assert vols[name] == pytest.approx(mesh.voxel_volumes_ml[name], rel=0.02), name

@@ -1,0 +1,184 @@
+"""The 2D hemidisk (MODEL.md sections 4-5, issue 3): physics that must hold."""
+
+from __future__ import annotations
+
+import math
+
+import ngsolve as ngs
+import numpy as np
+import pytest
+
+from brainbulge.errors import InfeasibleError, InputError
+from brainbulge.geometry.hemidisk import Hemidisk
+from brainbulge.geometry.skull2d import RigidSkull2D
+from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+from brainbulge.results.quadrature import quadrature_points
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions, solve
+
+
+def _solve(**kw):
+    case = HemidiskCase(**kw)
+    problem = hemidisk_problem(case)
+    form = MixedForm(problem)
+    solver = NewtonSolver(form, SolverOptions(steps=kw.get("steps", 4)))
+    sol = solver.solve()
+    return case, problem, form, solver, sol
+
+
+@pytest.fixture(scope="module")
+def noslip():
+    return _solve(contact="noslip", mesh_size=0.1)
+
+
+@pytest.fixture(scope="module")
+def sliding():
+    return _solve(contact="sliding", mesh_size=0.05)
+
+
+def test_mesh_regions_and_boundaries() -> None:
+    geo = Hemidisk(alpha_deg=80, beta_deg=60)
+    mesh = geo.mesh(0.1)
+    area = ngs.Integrate(1, mesh)
+    assert area == pytest.approx(math.pi / 2, rel=1e-6)
+    sector = ngs.Integrate(1, mesh, definedon=mesh.Materials("swelling"))
+    assert sector == pytest.approx(math.pi / 2 * 80 / 180, rel=1e-6)
+    opening = ngs.Integrate(1, mesh, definedon=mesh.Boundaries("opening"))
+    assert opening == pytest.approx(math.radians(60), rel=1e-6)
+    assert ngs.Integrate(1, mesh, definedon=mesh.Boundaries("base")) == pytest.approx(2.0)
+
+
+def test_skull_gap_function() -> None:
+    """g = R - r on the inner surface side, rounded corners, positive in the opening."""
+    skull = RigidSkull2D(R=1.0, beta_deg=60, thickness=0.2, edge_radius=0.05)
+    th = np.radians([20.0, 160.0])
+    pts = np.stack([0.9 * np.cos(th), 0.9 * np.sin(th)], axis=1)
+    np.testing.assert_allclose(skull.gap_numpy(pts), 0.1, atol=1e-12)
+    out = np.array([[1.02 * np.cos(np.radians(20)), 1.02 * np.sin(np.radians(20))]])
+    assert skull.gap_numpy(out)[0] == pytest.approx(-0.02)  # 0.02 deep in the bone
+    top = np.array([[0.0, 1.3]])  # above the opening, outside the skull
+    assert skull.gap_numpy(top)[0] > 0.2
+    # the NGSolve form equals the NumPy form
+    mesh = ngs.Mesh(ngs.unit_square.GenerateMesh(maxh=0.5))
+    g = skull.gap(ngs.CF((ngs.x * 1.4 - 0.7, ngs.y * 1.4)))
+    for px, py in [(0.1, 0.9), (0.5, 0.75), (0.9, 0.2), (0.3, 0.1)]:
+        X = np.array([[px * 1.4 - 0.7, py * 1.4]])
+        assert g(mesh(px, py)) == pytest.approx(skull.gap_numpy(X)[0], abs=1e-12)
+
+
+def test_noslip_boundary_does_not_move(noslip) -> None:
+    _, problem, form, _, sol = noslip
+    assert sol.converged
+    mesh = problem.mesh
+    q = quadrature_points(mesh, order=4, boundary=True)
+    on_skull = q(mesh.BoundaryCF({"skull": 1, "base": 1}, default=0)) > 0.5
+    u = q(form.u)
+    assert np.abs(u[on_skull]).max() < 1e-12
+
+
+def test_mirror_symmetry(noslip) -> None:
+    """Symmetric inputs: mirror-symmetric displacement, up to the discretisation error of a
+    mesh that is not itself symmetric (< 1% of the largest displacement)."""
+    _, problem, form, _, _ = noslip
+    mesh = problem.mesh
+    q = quadrature_points(mesh, order=2)
+    umax = np.abs(q(form.u)).max()
+    for x, y in [(0.3, 0.5), (0.6, 0.2), (0.1, 0.9), (0.4, 0.85)]:
+        ur = np.asarray(form.u(mesh(x, y)))
+        ul = np.asarray(form.u(mesh(-x, y)))
+        np.testing.assert_allclose([ul[0], ul[1]], [-ur[0], ur[1]], atol=1e-2 * umax)
+
+
+def test_sliding_contact(sliding) -> None:
+    """Where the skull pushes, the boundary stays on the circle (penetration < 1e-4 R), the
+    contact pressure is compressive only, and tissue slides (tangential motion)."""
+    case, problem, form, solver, sol = sliding
+    assert sol.converged
+    assert solver.max_penetration() < 1e-4 * case.R
+    mesh = problem.mesh
+    q = quadrature_points(mesh, order=4, boundary=True)
+    skull_part = q(mesh.BoundaryCF({"skull": 1}, default=0)) > 0.5
+    x = q.X + q(form.u)
+    r = np.linalg.norm(x, axis=1)
+    pc = q(form.contact_pressure())
+    pressed = skull_part & (pc > 1.0)
+    assert pressed.sum() > 10
+    # pressed points lie on the skull's surface: the circle, or its rounded cut edge where
+    # tissue has slid past the opening's corner
+    assert np.abs(q(form.gap())[pressed]).max() < 1e-4
+    on_circle = pressed & (np.abs(np.arctan2(x[:, 1], x[:, 0]) - np.pi / 2) > np.radians(35))
+    assert on_circle.sum() > 5
+    assert np.abs(r[on_circle] - case.R).max() < 1e-4
+    assert np.all(pc >= 0)
+    # frictionless: the tissue slides towards the opening along the skull
+    t = np.stack([-q.X[:, 1], q.X[:, 0]], axis=1) / case.R
+    slide = np.einsum("ij,ij->i", q(form.u), t)
+    assert np.abs(slide[skull_part]).max() > 1e-3
+
+
+def test_larger_opening_lowers_max_radial_stretch() -> None:
+    maxima = []
+    for beta in (60.0, 120.0):
+        case, problem, form, solver, sol = _solve(contact="noslip", beta=beta, mesh_size=0.1)
+        assert sol.converged
+        from brainbulge.results.summary import solution_summary
+
+        s = solution_summary(sol, solver, np.zeros(2), case.geometry.singular_points(), 0.05)
+        maxima.append(s["max_radial_stretch"])
+    assert maxima[1] < maxima[0]
+
+
+@pytest.mark.parametrize("contact", ["noslip", "sliding"])
+def test_closed_skull_is_infeasible(contact) -> None:
+    with pytest.raises(InfeasibleError, match="closed domain"):
+        solve(hemidisk_problem(HemidiskCase(contact=contact, beta=0, mesh_size=0.2)))
+
+
+def test_small_disk_matches_inclusion_map() -> None:
+    """A small swelling disk far from all boundaries: material circles around it follow
+    ``r^2 = R^2 + (Js - 1) A^2`` (MODEL.md section 7)."""
+    A, Js, c = 0.05, 1.3, np.array([0.0, 0.5])
+    case, problem, form, _, sol = _solve(
+        contact="noslip",
+        alpha=None,
+        disk=[0.0, 0.5, A],
+        swelling=Js,
+        mesh_size=0.1,
+        corner_mesh_size=0.01,
+    )
+    assert sol.converged
+    mesh = problem.mesh
+    worst = 0.0
+    for R in (0.06, 0.08):
+        for t in np.linspace(0, 2 * np.pi, 8, endpoint=False):
+            X = c + R * np.array([np.cos(t), np.sin(t)])
+            u = np.asarray(form.u(mesh(*X)))
+            # the far field moves the disk as a whole: take radii about the moved centre
+            uc = np.asarray(form.u(mesh(*c)))
+            r = np.linalg.norm(X + u - c - uc)
+            worst = max(worst, abs(r / math.sqrt(R**2 + (Js - 1) * A**2) - 1))
+    assert worst < 0.01, worst
+
+
+@pytest.mark.parametrize(
+    "kw,match",
+    [
+        ({"alpha": 0.0}, "alpha"),
+        ({"alpha": 190.0}, "alpha"),
+        ({"beta": -5.0}, "beta"),
+        ({"beta": 200.0}, "beta"),
+        ({"swelling": 0.0}, "Js"),
+        ({"swelling": -1.0}, "Js"),
+        ({"swelling": float("nan")}, "Js"),
+        ({"alpha": None, "disk": [0.0, 0.9, 0.2]}, "disk"),
+        ({"alpha": None, "disk": [0.0, 0.05, 0.1]}, "disk"),
+        ({"contact": "glue"}, "contact"),
+        ({"beta": 120.0, "opening_center": 20.0}, "opening"),
+        ({"material": "jelly"}, "preset"),
+    ],
+)
+def test_bad_input_one_line(kw, match) -> None:
+    with pytest.raises(InputError, match=match) as err:
+        case = HemidiskCase(**kw)
+        case.geometry  # noqa: B018
+        case.tissue_material()
+    assert "\n" not in str(err.value)
