@@ -92,6 +92,7 @@ class MixedForm:
         self.contact_masks: list[ngs.CoefficientFunction] = []
         self._contact_z: list[ngs.CoefficientFunction] = []
         h = _mesh_size(mesh)
+        self.h = h
         self.r0 = contact_penalty if contact_penalty is not None else 100 * self.mu_max / h
         self.r = ngs.Parameter(self.r0)  # raised by penalty continuation at the final load
         self.eps_c = 0.02 * self.mu_max  # smoothing of the contact law [kPa]

@@ -250,7 +250,7 @@ class NewtonSolver:
             return
         # contact boundaries that do not touch the obstacle at rest can move out (an opening)
         free_contact = sum(
-            float(ngs.Integrate(ngs.IfPos(g - 1e-6 * self.length, mask, 0), problem.mesh, ngs.BND))
+            float(ngs.Integrate(ngs.IfPos(g - 0.01 * self.form.h, mask, 0), problem.mesh, ngs.BND))
             for g, mask in zip(self.form.contact_gaps, self.form.contact_masks, strict=True)
         )
         if free_contact > 1e-9 * self.length ** (problem.dim - 1):
