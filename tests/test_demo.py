@@ -1,0 +1,21 @@
+"""The main job: ``brainbulge demo --quick`` writes a report whose figures and tables exist."""
+
+from __future__ import annotations
+
+import re
+
+from brainbulge.cli import main
+
+
+def test_demo_quick_report(tmp_path) -> None:
+    out = tmp_path / "demo"
+    assert main(["demo", "--quick", "--out", str(out)]) == 0
+    report = (out / "report.md").read_text()
+    images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
+    assert len(images) >= 5
+    for img in images:
+        assert (out / img).is_file() and (out / img).stat().st_size > 1000, img
+    assert "| headline_noslip |" in report and "failed" not in report
+    for sub in ("headline", "sweep"):
+        assert (out / sub / "table.csv").is_file()
+        assert (out / sub / "study.json").is_file()
