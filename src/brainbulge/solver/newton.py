@@ -218,12 +218,14 @@ class NewtonSolver:
         n_aug = its = 0
         norm = 0.0
         r0 = form.r.Get()
+        continuation = True
         while pen > pen_tol and n_aug < self.opt.max_augmentations:
             saved_x = x.CreateVector()
             saved_x.data = x
             saved_lam = [lam.vec.FV().NumPy().copy() for lam in form.contact_multipliers]
             saved_r = form.r.Get()
-            if form.r.Get() < 1e3 * r0 and pen > 10 * pen_tol:
+            raising = continuation and form.r.Get() < 1e3 * r0 and pen > 10 * pen_tol
+            if raising:
                 # penalty continuation: penetration ~ 1/r, Newton restarts from a close state
                 form.r.Set(form.r.Get() * 3)
             else:
@@ -235,6 +237,11 @@ class NewtonSolver:
                 form.r.Set(saved_r)
                 for lam, v in zip(form.contact_multipliers, saved_lam, strict=True):
                     lam.vec.FV().NumPy()[:] = v
+                norm = self.scaled_norm(self.residual(x))
+                if raising:  # the stiffer penalty failed: go on with Uzawa updates at this r
+                    continuation = False
+                    n_aug += 1
+                    continue
                 log.warning("contact augmentation stopped: penetration %.3g", pen)
                 break
             n_aug += 1
