@@ -143,11 +143,11 @@ class NewtonSolver:
         return K[self.free][:, self.free]
 
     def newton_direction(self, x: ngs.BaseVector) -> ngs.BaseVector:
-        """``dx`` with ``K(x) dx = R(x)`` (bubbles condensed and recovered for MINI)."""
+        """``dx`` with ``K(x) dx = R(x)``; ``self.res`` must hold ``R(x)`` (as in :meth:`newton`)."""
         K = self.tangent(x)
         a = self.form.a
         rhs = x.CreateVector()
-        a.Apply(x, rhs)
+        rhs.data = self.res  # residual at x: newton() always evaluates x last
         if self.form.condense:
             rhs.data += a.harmonic_extension_trans * rhs
         t0 = time.perf_counter()

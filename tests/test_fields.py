@@ -1,0 +1,47 @@
+"""Output fields of MODEL.md section 3 on deformations with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brainbulge.results.fields import (
+    max_principal_strain,
+    radial_directions,
+    stretch_along,
+    tangential_stretch,
+)
+
+
+def test_stretches_of_a_rotated_stretch() -> None:
+    """F = Q diag(a, b, c): C = diag(a^2, b^2, c^2) whatever the rotation Q."""
+    a, b, c = 1.3, 0.8, 1.1
+    th = 0.7
+    Q = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
+    F = (Q @ np.diag([a, b, c]))[None]
+    C = F.transpose(0, 2, 1) @ F
+    n = np.array([[1.0, 0.0, 0.0]])
+    assert stretch_along(C, n)[0] == pytest.approx(a)
+    assert tangential_stretch(C, n, dim=3)[0] == pytest.approx(max(b, c))  # largest in plane
+    assert tangential_stretch(C, n, dim=2)[0] == pytest.approx(b)  # in-plane perpendicular
+    assert max_principal_strain(C)[0] == pytest.approx(0.5 * (a**2 - 1))
+
+
+def test_tangential_stretch_3d_oblique_direction() -> None:
+    rng = np.random.default_rng(0)
+    F = np.eye(3) + 0.3 * rng.standard_normal((3, 3))
+    C = (F.T @ F)[None]
+    n = np.array([[1.0, 2.0, 2.0]]) / 3.0
+    # brute force: maximise |F t| over unit t perpendicular to n
+    e1 = np.cross(n[0], [1.0, 0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n[0], e1)
+    ts = [np.cos(p) * e1 + np.sin(p) * e2 for p in np.linspace(0, np.pi, 20001)]
+    brute = max(np.linalg.norm(F @ t) for t in ts)
+    assert tangential_stretch(C, n, dim=3)[0] == pytest.approx(brute, rel=1e-7)
+
+
+def test_radial_directions() -> None:
+    X = np.array([[3.0, 4.0], [0.0, 0.0]])
+    n = radial_directions(X, np.zeros(2))
+    np.testing.assert_allclose(n, [[0.6, 0.8, 0.0], [0.0, 0.0, 0.0]])
