@@ -143,7 +143,7 @@ class NewtonSolver:
         return K[self.free][:, self.free]
 
     def newton_direction(self, x: ngs.BaseVector) -> ngs.BaseVector:
-        """``dx`` with ``K(x) dx = R(x)``; ``self.res`` must hold ``R(x)`` (as in :meth:`newton`)."""
+        """``dx`` with ``K(x) dx = R(x)``; ``self.res`` must hold ``R(x)``, as in newton()."""
         K = self.tangent(x)
         a = self.form.a
         rhs = x.CreateVector()
