@@ -25,11 +25,13 @@ from __future__ import annotations
 import re
 
 import ngsolve as ngs
+import numpy as np
 
 from brainbulge.errors import InputError
 from brainbulge.materials.kinematics import deformation_gradient
 from brainbulge.materials.mooney_rivlin import MooneyRivlin, mooney_rivlin_psi
 from brainbulge.model.problem import Problem
+from brainbulge.solver.point_contact import PointContact
 
 ELEMENTS = ("taylor-hood", "mini")
 
@@ -98,7 +100,11 @@ class MixedForm:
         self.eps_c = 0.02 * self.mu_max  # smoothing of the contact law [kPa]
         self.g_off = self.eps_c / (2 * self.r)  # makes g = 0 the fixed point of Uzawa
         X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
+        self.point_contacts: list[PointContact] = []
         for c in problem.contacts:
+            if not hasattr(c.obstacle, "gap"):  # an obstacle known only on point arrays
+                self.point_contacts.append(PointContact(self, c.boundary, c.obstacle))
+                continue
             region = mesh.Boundaries(c.boundary)
             if not any(region.Mask()):
                 raise InputError(f"contact boundary {c.boundary!r} matches no mesh boundary")
@@ -138,7 +144,7 @@ class MixedForm:
 
     @property
     def contacts_present(self) -> bool:
-        return bool(self.contact_multipliers)
+        return bool(self.contact_multipliers or self.point_contacts)
 
     # --- fields of the current state -------------------------------------------------
     @property
@@ -172,12 +178,28 @@ class MixedForm:
             self.contact_multipliers, self._contact_z, self.contact_regions, strict=True
         ):
             lam.Set(contact_pressure_law(z, self.eps_c), ngs.BND, definedon=region)
+        for pc in self.point_contacts:
+            pc.update_multipliers()
+
+    def multiplier_state(self) -> list[np.ndarray]:
+        """A copy of every contact multiplier (to undo a failed step)."""
+        state = [lam.vec.FV().NumPy().copy() for lam in self.contact_multipliers]
+        return state + [pc.lam.copy() for pc in self.point_contacts]
+
+    def restore_multipliers(self, state: list[np.ndarray]) -> None:
+        n = len(self.contact_multipliers)
+        for lam, v in zip(self.contact_multipliers, state[:n], strict=True):
+            lam.vec.FV().NumPy()[:] = v
+        for pc, v in zip(self.point_contacts, state[n:], strict=True):
+            pc.lam = v.copy()
 
     def contact_pressure(self) -> ngs.CoefficientFunction:
         """Current contact pressure ``<lambda - r g>_+`` [kPa] (zero off contact)."""
         total = ngs.CF(0)
         for z, mask in zip(self._contact_z, self.contact_masks, strict=True):
             total = total + contact_pressure_law(z, self.eps_c) * mask
+        for pc in self.point_contacts:
+            total = total + pc.fields()[0]
         return total
 
     def gap(self) -> ngs.CoefficientFunction:
@@ -185,6 +207,8 @@ class MixedForm:
         total = ngs.CF(0)
         for g, mask in zip(self.contact_gaps, self.contact_masks, strict=True):
             total = total + ngs.IfPos(mask - 0.5, g, 0)
+        for pc in self.point_contacts:
+            total = total + pc.fields()[1]
         return total
 
 

@@ -122,8 +122,12 @@ class NewtonSolver:
         t0 = time.perf_counter()
         with ngs.TaskManager():
             self.form.a.Apply(x, self.res)
+        R = self.res.FV().NumPy()
+        for pc in self.form.point_contacts:
+            pc.update(x.FV().NumPy())
+            pc.add_residual(R)
         self.t_assembly += time.perf_counter() - t0
-        return self.res.FV().NumPy().copy()
+        return R.copy()
 
     def scaled_norm(self, r: np.ndarray) -> float:
         """Residual norm with forces and volumes made dimensionless."""
@@ -139,6 +143,20 @@ class NewtonSolver:
         with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
             self.form.a.AssembleLinearization(x)
         K = sp.csr_matrix(self.form.a.mat.CSR())
+        if self.form.point_contacts:
+            parts = [K.tocoo()]
+            for pc in self.form.point_contacts:
+                pc.update(x.FV().NumPy())
+                parts.append(pc.tangent().tocoo())
+            # summed through COO: a CSR sum would drop the structural zeros of the pressure
+            # diagonal, which the symmetric-indefinite factorisation needs
+            K = sp.coo_matrix(
+                (
+                    np.concatenate([m.data for m in parts]),
+                    (np.concatenate([m.row for m in parts]), np.concatenate([m.col for m in parts])),
+                ),
+                shape=K.shape,
+            ).tocsr()
         self.t_assembly += time.perf_counter() - t0
         return K[self.free][:, self.free]
 
@@ -194,12 +212,12 @@ class NewtonSolver:
     # --- contact -----------------------------------------------------------------------
     def max_penetration(self) -> float:
         """Largest penetration ``max(-g, 0)`` at boundary integration points [length]."""
+        pen = max((pc.max_penetration() for pc in self.form.point_contacts), default=0.0)
         if not self.form.contact_gaps:
-            return 0.0
+            return pen
         from brainbulge.results.quadrature import quadrature_points
 
         q = quadrature_points(self.form.mesh, order=4, boundary=True)
-        pen = 0.0
         for g, mask in zip(self.form.contact_gaps, self.form.contact_masks, strict=True):
             on = q(mask) > 0.5
             if on.any():
@@ -222,7 +240,7 @@ class NewtonSolver:
         while pen > pen_tol and n_aug < self.opt.max_augmentations:
             saved_x = x.CreateVector()
             saved_x.data = x
-            saved_lam = [lam.vec.FV().NumPy().copy() for lam in form.contact_multipliers]
+            saved_lam = form.multiplier_state()
             saved_r = form.r.Get()
             raising = continuation and form.r.Get() < 1e3 * r0 and pen > 10 * pen_tol
             if raising:
@@ -235,8 +253,7 @@ class NewtonSolver:
             if not ok:
                 x.data = saved_x
                 form.r.Set(saved_r)
-                for lam, v in zip(form.contact_multipliers, saved_lam, strict=True):
-                    lam.vec.FV().NumPy()[:] = v
+                form.restore_multipliers(saved_lam)
                 norm = self.scaled_norm(self.residual(x))
                 if raising:  # the stiffer penalty failed: go on with Uzawa updates at this r
                     continuation = False
@@ -260,6 +277,7 @@ class NewtonSolver:
             float(ngs.Integrate(ngs.IfPos(g - 0.01 * self.form.h, mask, 0), problem.mesh, ngs.BND))
             for g, mask in zip(self.form.contact_gaps, self.form.contact_masks, strict=True)
         )
+        free_contact += sum(pc.free_measure(0.01 * self.form.h) for pc in self.form.point_contacts)
         if free_contact > 1e-9 * self.length ** (problem.dim - 1):
             return
         added = float(ngs.Integrate(self.form.Js - 1, problem.mesh))
@@ -288,7 +306,7 @@ class NewtonSolver:
             while t < 1 - 1e-12:
                 dt = min(dt, 1 - t, opt.max_step)
                 form.set_load(t + dt)
-                lam_saved = [lam.vec.FV().NumPy().copy() for lam in form.contact_multipliers]
+                lam_saved = form.multiplier_state()
                 if last_increment is not None:  # predictor: extrapolate the last increment
                     x.data = x_prev + (dt / last_dt) * last_increment
                     form.set_load(t + dt)  # exact prescribed values over the predictor
@@ -298,7 +316,7 @@ class NewtonSolver:
                     ok, its2, norm = self.newton(x)
                     its += its2
                 n_aug, pen = 0, 0.0
-                if ok and form.contact_multipliers:
+                if ok and form.contacts_present:
                     pen = self.max_penetration()
                     if t + dt >= 1 - 1e-12:  # augment at the final load only
                         n_aug, its2, norm, pen = self.augment(x, pen, pen_tol)
@@ -306,8 +324,7 @@ class NewtonSolver:
                 if not ok:
                     sol.rejected_steps += 1
                     x.data = x_prev
-                    for lam, saved in zip(form.contact_multipliers, lam_saved, strict=True):
-                        lam.vec.FV().NumPy()[:] = saved
+                    form.restore_multipliers(lam_saved)
                     log.info("  load %.4f: not converged (|R| = %.2e), cutting step", t + dt, norm)
                     dt *= 0.5
                     if dt < opt.min_step:

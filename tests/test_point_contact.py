@@ -1,0 +1,150 @@
+"""Contact with obstacles known only on point arrays (the 3D skull), MODEL.md sections 6-7.
+
+- derivatives: the point-contact residual is the gradient of its energy, and against a plane
+  (no curvature term) its tangent is the exact derivative of the residual;
+- a swelling sphere in an incompressible ball that slides inside a rigid spherical skull with
+  polar openings: away from the openings the exact radial map ``r^3 = R^3 + (Js - 1) A^3``;
+  penetration below tolerance; contact forces normal while the surface slides;
+- a closed skull is infeasible.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from brainbulge.errors import InfeasibleError
+from brainbulge.geometry.inclusion import inclusion_mesh
+from brainbulge.geometry.sphere_skull import SphericalSkull
+from brainbulge.materials import MooneyRivlin
+from brainbulge.model import Problem
+from brainbulge.model.problem import Contact
+from brainbulge.solver import SolverOptions
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.newton import NewtonSolver
+from tests.conftest import unit_box_mesh
+
+GRAY = MooneyRivlin(0.28, 333.0)
+A, JS = 0.2, 1.3
+
+
+@dataclass
+class Plane:
+    """Half-space ``n . x > c`` is free; the rigid body lies below the plane."""
+
+    normal: tuple[float, ...]
+    c: float
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = np.asarray(self.normal) / np.linalg.norm(self.normal)
+        return x @ n - self.c, np.broadcast_to(n, x.shape).copy()
+
+
+def _contact_form(obstacle, element: str = "mini") -> MixedForm:
+    mesh = unit_box_mesh(3, h=0.5)
+    problem = Problem(mesh, {"tissue": GRAY}, {"tissue": 1.1}, contacts=[Contact("xmin", obstacle)])
+    return MixedForm(problem, element=element)
+
+
+@pytest.mark.parametrize("element", ["mini", "taylor-hood"])
+def test_point_contact_derivatives(element: str) -> None:
+    rng = np.random.default_rng(1)
+    form = _contact_form(Plane((1.0, 0.2, 0.1), 0.02), element)
+    pc = form.point_contacts[0]
+    form.r.Set(10.0)  # a soft penalty, so that random states span the three parts of s(z)
+    pc.lam = rng.uniform(-2 * form.eps_c, 3 * form.eps_c, pc.n_points)
+    x0 = 0.05 * rng.standard_normal(form.fes.ndof)
+    dx = rng.standard_normal(form.fes.ndof)
+    pc.update(x0)
+    R = np.zeros(form.fes.ndof)
+    pc.add_residual(R)
+    K = pc.tangent()
+    assert np.any(pc.z > form.eps_c) and np.any(pc.z < 0), "test must span the contact law"
+    eps = 1e-6
+
+    def energy(x):
+        pc.update(x)
+        return pc.energy()
+
+    def residual(x):
+        pc.update(x)
+        r = np.zeros(form.fes.ndof)
+        pc.add_residual(r)
+        return r
+
+    dE = (energy(x0 + eps * dx) - energy(x0 - eps * dx)) / (2 * eps)
+    assert dE == pytest.approx(R @ dx, rel=1e-6)
+    dR = (residual(x0 + eps * dx) - residual(x0 - eps * dx)) / (2 * eps)
+    assert np.linalg.norm(dR - K @ dx) < 1e-6 * np.linalg.norm(K @ dx)
+
+
+@pytest.fixture(scope="module")
+def capped_sphere():
+    mesh = inclusion_mesh(3, A=A, h=0.15, h_inclusion=A / 3)
+    skull = SphericalSkull(R=1.0, cap_deg=35, thickness=0.2, edge_radius=0.05, both_poles=True)
+    problem = Problem(
+        mesh,
+        {"inclusion": GRAY, "matrix": GRAY},
+        {"inclusion": JS},
+        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
+        contacts=[Contact("outer", skull)],
+    )
+    form = MixedForm(problem, element="mini")
+    solver = NewtonSolver(form, SolverOptions(steps=2))
+    sol = solver.solve()
+    return mesh, form, solver, sol
+
+
+def test_capped_sphere_radial_map(capped_sphere) -> None:
+    mesh, form, _, sol = capped_sphere
+    assert sol.converged
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for R in (0.1, 0.25, 0.35, 0.5):
+        for _ in range(6):
+            d = np.abs(rng.standard_normal(3)) + 0.2
+            d[2] *= 0.3  # away from the polar openings
+            d /= np.linalg.norm(d)
+            X = R * d
+            r = np.linalg.norm(X + np.asarray(form.u(mesh(*X))))
+            exact = (R**3 + (JS - 1) * A**3) ** (1 / 3) if R >= A else JS ** (1 / 3) * R
+            worst = max(worst, abs(r - exact) / exact)
+    assert worst < 0.01, f"radius error {worst:.2%}"
+
+
+def test_capped_sphere_contact(capped_sphere) -> None:
+    _, form, solver, _ = capped_sphere
+    pc = form.point_contacts[0]
+    assert solver.max_penetration() < 1e-5  # of the radius 1
+    p = pc.pressure()
+    on = p > 0.1 * p.max()
+    assert on.sum() > 10
+    # the skull pushes along its normal only (frictionless): radial at the deformed point
+    f = np.zeros(form.fes.ndof)
+    pc.add_residual(f)
+    forces = -(pc.P @ f).reshape(-1, 3)
+    x = pc.X + (pc.P @ form.gfu.vec.FV().NumPy()).reshape(-1, 3)
+    radial_dir = x / np.linalg.norm(x, axis=1)[:, None]
+    assert np.allclose(np.cross(forces, radial_dir)[on], 0, atol=1e-6 * np.abs(forces).max())
+    assert np.all(np.einsum("ij,ij->i", forces, radial_dir)[on] < 0)  # pushes inwards
+    # ... while the tissue in contact slides along it towards the openings
+    u = (pc.P @ form.gfu.vec.FV().NumPy()).reshape(-1, 3)
+    radial = np.einsum("ij,ij->i", u, pc.X)
+    tangential = np.linalg.norm(u - radial[:, None] * pc.X, axis=1)
+    assert np.max(tangential[on]) > 100 * np.max(np.abs(radial[on]))
+
+
+def test_closed_skull_is_infeasible() -> None:
+    mesh = inclusion_mesh(3, A=A, h=0.3, h_inclusion=A / 2)
+    skull = SphericalSkull(R=1.0, cap_deg=0.0, thickness=0.2, edge_radius=0.05)
+    problem = Problem(
+        mesh,
+        {"inclusion": GRAY, "matrix": GRAY},
+        {"inclusion": JS},
+        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
+        contacts=[Contact("outer", skull)],
+    )
+    with pytest.raises(InfeasibleError, match="closed domain"):
+        NewtonSolver(MixedForm(problem, element="mini")).solve()
