@@ -24,7 +24,7 @@ from brainbulge.model.problem import Contact
 from brainbulge.solver import SolverOptions
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
-from tests.conftest import unit_box_mesh
+from conftest import unit_box_mesh
 
 GRAY = MooneyRivlin(0.28, 333.0)
 A, JS = 0.2, 1.3

@@ -153,7 +153,10 @@ class NewtonSolver:
             K = sp.coo_matrix(
                 (
                     np.concatenate([m.data for m in parts]),
-                    (np.concatenate([m.row for m in parts]), np.concatenate([m.col for m in parts])),
+                    (
+                        np.concatenate([m.row for m in parts]),
+                        np.concatenate([m.col for m in parts]),
+                    ),
                 ),
                 shape=K.shape,
             ).tocsr()

@@ -125,9 +125,7 @@ class PointContact:
         self.X = X
         self.weights = weights  # lumped reference area per point [length^(dim-1)]
         self.n_points = len(X)
-        self.P = sp.csr_matrix(
-            (vals, (rows, cols)), shape=(self.n_points * dim, form.fes.ndof)
-        )
+        self.P = sp.csr_matrix((vals, (rows, cols)), shape=(self.n_points * dim, form.fes.ndof))
         self.lam = np.zeros(self.n_points)  # contact pressure multiplier [stress]
         # initial-gap adjustment (as for the symbolic contact): points that rest on the
         # obstacle up to the geometric error of the mesh touch it exactly
