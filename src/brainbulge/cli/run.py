@@ -19,7 +19,7 @@ from typing import Any
 from brainbulge.cli import add_output_options
 from brainbulge.errors import InputError
 
-COMMANDS = ("hemidisk",)
+COMMANDS = ("hemidisk", "brain")
 
 
 def add_parser(sub: Any) -> None:
@@ -41,6 +41,11 @@ def run_command(args: argparse.Namespace) -> int:
     table = config.get(command)
     if not isinstance(table, dict):
         raise InputError(f"{args.config}: missing table [{command}] with the case's options")
+    if command == "brain":
+        from brainbulge.cli.brain import run_case as run_brain_case
+        from brainbulge.studies.craniectomy import case_from_dict as brain_case
+
+        return run_brain_case(args, brain_case(table))
     from brainbulge.cli.hemidisk import run_case
     from brainbulge.studies.hemidisk import case_from_dict
 

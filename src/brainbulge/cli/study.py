@@ -12,7 +12,7 @@ from typing import Any
 from brainbulge.cli import add_output_options, finish_run, start_run
 from brainbulge.errors import BrainbulgeError, InputError
 
-STUDIES = ("hemidisk-sector", "hemidisk-disk")
+STUDIES = ("hemidisk-sector", "hemidisk-disk", "craniectomy")
 
 
 def add_parser(sub: Any) -> None:
@@ -26,6 +26,10 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--workers", type=int, default=None, help="local worker processes")
     p.add_argument("--mesh-size", type=float, default=0.05, help="element size [units of R]")
+    p.add_argument("--tets", type=int, default=30_000,
+                   help="brain mesh size in tets (craniectomy study)")
+    p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
+    p.add_argument("--swelling", type=float, default=1.1, help="white-matter Js (craniectomy)")
     p.add_argument("--steps", type=int, default=4, help="initial load steps per scenario")
     p.add_argument(
         "--alphas", type=float, nargs="+", default=None, help="sector angles [deg] (sector study)"
@@ -40,6 +44,12 @@ def add_parser(sub: Any) -> None:
 def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
     from brainbulge.studies import hemidisk as hd
 
+    if name == "craniectomy":
+        from brainbulge.studies.craniectomy import craniectomy_scenarios
+
+        return craniectomy_scenarios(
+            tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps
+        )
     common = {"mesh_size": args.mesh_size, "steps": args.steps}
     if name == "hemidisk-sector":
         return hd.sector_scenarios(
@@ -53,6 +63,11 @@ def run_command(args: argparse.Namespace) -> int:
         raise InputError(f"--workers {args.workers} must be at least 1")
     scenarios = scenarios_for(args.name, args)
     for sc in scenarios:  # validate every scenario before starting
+        if args.name == "craniectomy":
+            from brainbulge.studies.craniectomy import case_from_dict as brain_case
+
+            brain_case(sc)
+            continue
         from brainbulge.studies.hemidisk import case_from_dict
 
         case = case_from_dict({k: v for k, v in sc.items() if k != "name"})
@@ -83,6 +98,16 @@ def run_study_and_report(
     from brainbulge.studies import hemidisk as hd
     from brainbulge.studies.runner import run_study
 
+    if name == "craniectomy":
+        from brainbulge.studies import craniectomy as cr
+
+        mesh = cr.prepare_study_mesh(out, scenarios[0])
+        scenarios = [{**sc, "mesh": str(mesh)} for sc in scenarios]
+        rows = run_study(scenarios, "brainbulge.studies.craniectomy:study_task", out,
+                         scheduler=scheduler, n_workers=workers)
+        cr.write_comparison(out, scenarios, rows)
+        cr.write_report(out, scenarios, rows)
+        return sum(1 for r in rows if r.get("complete"))
     rows = run_study(
         scenarios,
         "brainbulge.studies.hemidisk:study_task",

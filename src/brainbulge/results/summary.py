@@ -9,6 +9,9 @@ and mesh-convergent ``max_*`` / ``min_*`` over the integration points farther th
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
+
 import numpy as np
 
 from brainbulge.results.fields import output_fields, sample
@@ -60,13 +63,23 @@ def solution_summary(
     centre: np.ndarray,
     singular_points: list[tuple[float, ...]],
     edge_exclusion: float,
+    near_singular: Callable[[np.ndarray], np.ndarray] | None = None,
+    tissue: str | None = None,
 ) -> dict[str, object]:
-    """The summary of MODEL.md section 3 / issue keys for any converged or partial solution."""
+    """The summary of MODEL.md section 3 / issue keys for any converged or partial solution.
+
+    ``max_*``/``min_*`` leave out points within ``edge_exclusion`` of ``singular_points`` and,
+    when given, points where ``near_singular(X)`` is true (e.g. a band around a 3D flap rim).
+    ``tissue`` (a region regex) restricts the stretch and strain extremes to those regions;
+    the others (an ultrasoft CSF filler) are reported with the prefix ``csf_``.
+    """
     form = sol.form
     q = quadrature_points(form.mesh, order=4)
     s = sample(form, q.points)
     fields = output_fields(s, centre)
     keep = away_from(s.X, singular_points, edge_exclusion)
+    if near_singular is not None:
+        keep &= ~near_singular(s.X)
     dim = form.dim
     J = fields["J"]
     out: dict[str, object] = {
@@ -84,7 +97,18 @@ def solution_summary(
         "max_vertical_displacement": float(fields["u_vertical"].max()),
         "min_vertical_displacement": float(fields["u_vertical"].min()),
     }
-    out.update(field_extremes(s.X, fields, keep))
+    if tissue is None:
+        out.update(field_extremes(s.X, fields, keep))
+    else:
+        rx = re.compile(f"^(?:{tissue})$")
+        mask_cf = form.mesh.MaterialCF(
+            {r: 1.0 for r in set(form.mesh.GetMaterials()) if rx.match(r)}, default=0.0
+        )
+        in_tissue = q(mask_cf) > 0.5
+        for prefix, sel in (("", in_tissue), ("csf_", ~in_tissue)):
+            if sel.any():
+                sub = {k: v[sel] for k, v in fields.items()}
+                out.update(field_extremes(s.X[sel], sub, keep[sel], prefix))
     out["raw_max_abs_J_minus_Js"] = float(np.max(np.abs(J - s.Js)))
     out["max_abs_J_minus_Js"] = float(np.max(np.abs(J - s.Js)[keep])) if keep.any() else None
     out["integral_J_minus_Js"] = float(np.sum((J - s.Js) * q.weights))

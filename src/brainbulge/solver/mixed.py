@@ -178,8 +178,6 @@ class MixedForm:
             self.contact_multipliers, self._contact_z, self.contact_regions, strict=True
         ):
             lam.Set(contact_pressure_law(z, self.eps_c), ngs.BND, definedon=region)
-        for pc in self.point_contacts:
-            pc.update_multipliers()
 
     def multiplier_state(self) -> list[np.ndarray]:
         """A copy of every contact multiplier (to undo a failed step)."""

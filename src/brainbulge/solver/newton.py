@@ -116,29 +116,51 @@ class NewtonSolver:
         self.t_assembly = 0.0
         self.t_solve = 0.0
         self.history: list[list[float]] = []  # scaled residual norms of each Newton solve
+        # point contacts: weight of gap against pressure in the active set [stress/length],
+        # and which points have a free DOF (a point on a clamped edge takes no constraint)
+        self.c_active = form.mu_max / form.h
+        free_mask = np.zeros(fes.ndof, dtype=bool)
+        free_mask[self.free] = True
+        self._pc_free = {
+            id(pc): np.asarray(
+                (abs(pc.P) @ free_mask.astype(float)).reshape(pc.n_points, -1).sum(axis=1) > 0
+            )
+            for pc in form.point_contacts
+        }
+        self._compl: list[np.ndarray] = []
+        self._forced: list[np.ndarray] = [np.zeros(pc.n_points, bool) for pc in form.point_contacts]
+        self._last_active: list[np.ndarray] = []
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
+        """``R(x)`` (full DOF numbering) with the point contacts' forces at their current
+        multipliers; also evaluates their complementarity residuals for :meth:`scaled_norm`."""
         t0 = time.perf_counter()
         with ngs.TaskManager():
             self.form.a.Apply(x, self.res)
         R = self.res.FV().NumPy()
+        self._compl = []
         for pc in self.form.point_contacts:
             pc.update(x.FV().NumPy())
-            pc.add_residual(R)
+            pc.add_forces(R)
+            self._compl.append(pc.complementarity(self.c_active)[pc_free(pc, self)])
         self.t_assembly += time.perf_counter() - t0
         return R.copy()
 
     def scaled_norm(self, r: np.ndarray) -> float:
-        """Residual norm with forces and volumes made dimensionless."""
+        """Residual norm with forces and volumes made dimensionless (contact
+        complementarity, a volume, counts with the pressure equations)."""
         rf = r[self.free]
         ru = np.linalg.norm(rf[self.is_u_free]) / self.force_scale
         rp = np.linalg.norm(rf[~self.is_u_free]) / self.volume
+        if self._compl:
+            rp = np.hypot(rp, np.linalg.norm(np.concatenate(self._compl)) / self.volume)
         val = float(np.hypot(ru, rp))
         return val if np.isfinite(val) else np.inf
 
     def tangent(self, x: ngs.BaseVector) -> sp.csr_matrix:
-        """The assembled (condensed) tangent restricted to the free DOFs."""
+        """The assembled (condensed) tangent restricted to the free DOFs, with the point
+        contacts' curvature terms."""
         t0 = time.perf_counter()
         with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
             self.form.a.AssembleLinearization(x)
@@ -147,43 +169,74 @@ class NewtonSolver:
             parts = [K.tocoo()]
             for pc in self.form.point_contacts:
                 pc.update(x.FV().NumPy())
-                parts.append(pc.tangent().tocoo())
-            # summed through COO: a CSR sum would drop the structural zeros of the pressure
-            # diagonal, which the symmetric-indefinite factorisation needs
-            K = sp.coo_matrix(
-                (
-                    np.concatenate([m.data for m in parts]),
-                    (
-                        np.concatenate([m.row for m in parts]),
-                        np.concatenate([m.col for m in parts]),
-                    ),
-                ),
-                shape=K.shape,
-            ).tocsr()
+                parts.append(-pc.curvature().tocoo())
+            K = _coo_sum(parts, K.shape)
         self.t_assembly += time.perf_counter() - t0
         return K[self.free][:, self.free]
 
-    def newton_direction(self, x: ngs.BaseVector) -> ngs.BaseVector:
-        """``dx`` with ``K(x) dx = R(x)``; ``self.res`` must hold ``R(x)``, as in newton()."""
+    def newton_direction(self, x: ngs.BaseVector) -> tuple[ngs.BaseVector, list[np.ndarray]]:
+        """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``.
+
+        ``self.res`` must hold ``R(x)``, as in :meth:`newton`. Without point contacts
+        ``K dx = R``. With them (primal-dual active set, see :mod:`point_contact`) inactive
+        multipliers go to zero (``dlam_I = lam_I``) and ``(dx, dlam_A)`` solves
+        ``[[K, -B_A^T], [-B_A, 0]] [dx, dlam_A] = [R + B_I^T lam_I, -A g_A]``.
+        """
         K = self.tangent(x)
         a = self.form.a
         rhs = x.CreateVector()
         rhs.data = self.res  # residual at x: newton() always evaluates x last
+        dlams: list[np.ndarray] = []
+        rows_B, rhs_B = [], []
+        self._last_active = []
+        for pc, forced in zip(self.form.point_contacts, self._forced, strict=True):
+            act = (pc.active(self.c_active) | forced) & pc_free(pc, self)
+            self._last_active.append(act)
+            dlam = pc.lam.copy()  # inactive: to zero
+            idle = np.flatnonzero(~act)
+            pc.add_forces(rhs.FV().NumPy(), -np.where(act, 0.0, pc.lam))  # + B_I^T lam_I
+            dlams.append(dlam)
+            on = np.flatnonzero(act)
+            rows_B.append((pc, on))
+            rhs_B.append(-pc.weights[on] * pc.g[on])
+            dlam[idle] = pc.lam[idle]
         if self.form.condense:
             rhs.data += a.harmonic_extension_trans * rhs
+        b = rhs.FV().NumPy()[self.free]
+        if rows_B:
+            B = sp.vstack([pc.B(on) for pc, on in rows_B]).tocsr()[:, self.free]
+            nB = B.shape[0]
+            n = K.shape[0]
+            K = _coo_sum(
+                [K.tocoo(), (-B).T.tocoo(), (-B).tocoo(), sp.coo_matrix((nB, nB))],
+                (n + nB, n + nB),
+                offsets=[(0, 0), (0, n), (n, 0), (n, n)],
+                diagonal=True,
+            )
+            b = np.concatenate([b, *rhs_B])
         t0 = time.perf_counter()
+        sol = self.linear.solve(K, b)
+        self.t_solve += time.perf_counter() - t0
         dx = x.CreateVector()
         dx[:] = 0
-        sol = self.linear.solve(K, rhs.FV().NumPy()[self.free])
-        self.t_solve += time.perf_counter() - t0
-        dx.FV().NumPy()[self.free] = sol
+        dx.FV().NumPy()[self.free] = sol[: len(self.free)]
+        k = len(self.free)
+        for (_, on), dlam in zip(rows_B, dlams, strict=True):
+            dlam[on] = sol[k : k + len(on)]
+            k += len(on)
         if self.form.condense:
             dx.data += a.harmonic_extension * dx
             dx.data += a.inner_solve * rhs
-        return dx
+        return dx, dlams
 
     def newton(self, x: ngs.BaseVector) -> tuple[bool, int, float]:
-        """Solve at the current load from the guess ``x`` (updated in place)."""
+        """Solve at the current load from the guess ``x`` (updated in place, with the
+        point contacts' multipliers)."""
+        pcs = self.form.point_contacts
+        # points forced into the active set for this solve: inactive points that a full
+        # Newton step pushed into the skull (left alone, such a weakly active point makes
+        # the active set cycle and the line search halve every step)
+        self._forced = [np.zeros(pc.n_points, dtype=bool) for pc in pcs]
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
         for it in range(self.opt.max_iterations + 1):
@@ -193,24 +246,55 @@ class NewtonSolver:
                 return True, it, norm
             if not np.isfinite(norm) or it == self.opt.max_iterations:
                 return False, it, norm
-            try:
-                dx = self.newton_direction(x)
-            except ConvergenceError:
-                return False, it, norm
             x0 = x.CreateVector()
             x0.data = x
-            s = 1.0
-            while True:
-                x.data = x0 - s * dx
-                trial = self.scaled_norm(self.residual(x))
-                if trial < (1 - 1e-4 * s) * norm or trial <= self.opt.tolerance:
+            lam0 = [pc.lam.copy() for pc in pcs]
+            for attempt in range(4):
+                try:
+                    dx, dlams = self.newton_direction(x)
+                except ConvergenceError:
+                    return False, it, norm
+                s = 1.0
+                while True:
+                    x.data = x0 - s * dx
+                    for pc, l0, dl in zip(pcs, lam0, dlams, strict=True):
+                        pc.lam = l0 - s * dl
+                    trial = self.scaled_norm(self.residual(x))
+                    if trial < (1 - 1e-4 * s) * norm or trial <= self.opt.tolerance:
+                        break
+                    if s == 1.0 and attempt < 3 and self._force_penetrating():
+                        s = 0.0  # retry the direction with the newly forced points
+                        break
+                    s *= 0.5
+                    if s < 1 / 1024:
+                        x.data = x0
+                        for pc, l0 in zip(pcs, lam0, strict=True):
+                            pc.lam = l0
+                        return False, it, norm
+                if s > 0:
                     norm = trial
                     break
-                s *= 0.5
-                if s < 1 / 1024:
-                    x.data = x0
-                    return False, it, norm
+                x.data = x0
+                for pc, l0 in zip(pcs, lam0, strict=True):
+                    pc.lam = l0
+                self.residual(x)
+            for forced, pc in zip(self._forced, pcs, strict=True):
+                forced &= pc.lam >= 0  # a forced point that pulls is let go
         return False, self.opt.max_iterations, norm
+
+    def _force_penetrating(self) -> bool:
+        """Force into the active set the inactive points that penetrate at the current
+        (trial) state; True if there were any."""
+        any_new = False
+        tol = 1e-6 * self.form.h
+        for pc, forced, act in zip(
+            self.form.point_contacts, self._forced, self._last_active, strict=True
+        ):
+            new = ~act & (pc.g < -tol) & pc_free(pc, self)
+            if new.any():
+                forced |= new
+                any_new = True
+        return any_new
 
     # --- contact -----------------------------------------------------------------------
     def max_penetration(self) -> float:
@@ -321,7 +405,7 @@ class NewtonSolver:
                 n_aug, pen = 0, 0.0
                 if ok and form.contacts_present:
                     pen = self.max_penetration()
-                    if t + dt >= 1 - 1e-12:  # augment at the final load only
+                    if t + dt >= 1 - 1e-12 and form.contact_multipliers:  # final load only
                         n_aug, its2, norm, pen = self.augment(x, pen, pen_tol)
                         its += its2
                 if not ok:
@@ -360,6 +444,33 @@ class NewtonSolver:
         sol.assembly_time_s = self.t_assembly
         sol.solve_time_s = self.t_solve
         return sol
+
+
+def pc_free(pc, solver: NewtonSolver) -> np.ndarray:
+    """Mask of the contact points of ``pc`` that move (have a free DOF)."""
+    return solver._pc_free[id(pc)]
+
+
+def _coo_sum(
+    parts: list[sp.coo_matrix],
+    shape: tuple[int, int],
+    offsets: list[tuple[int, int]] | None = None,
+    diagonal: bool = False,
+) -> sp.csr_matrix:
+    """Sum of sparse blocks placed at ``offsets``, through COO: a CSR sum would drop the
+    structural zeros of the pressure (and multiplier) diagonal, which the symmetric-indefinite
+    factorisation needs; ``diagonal`` adds the whole diagonal structurally."""
+    offsets = offsets or [(0, 0)] * len(parts)
+    rows = [m.row + o[0] for m, o in zip(parts, offsets, strict=True)]
+    cols = [m.col + o[1] for m, o in zip(parts, offsets, strict=True)]
+    data = [m.data for m in parts]
+    if diagonal:
+        rows.append(np.arange(shape[0]))
+        cols.append(np.arange(shape[0]))
+        data.append(np.zeros(shape[0]))
+    return sp.coo_matrix(
+        (np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=shape
+    ).tocsr()
 
 
 def solve(

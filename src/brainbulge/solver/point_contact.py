@@ -4,21 +4,24 @@ The 3D skull is a signed distance sampled on the MRI grid (:class:`RigidSkull`),
 symbolic expression, so the symbolic contact term of :mod:`mixed` cannot use it. Here the
 contact is enforced at *contact points* of the boundary: its vertices (and, for P2
 displacements, its edge midpoints), each with a lumped reference area ``A_i``. At the deformed
-position ``x_i = X_i + u(X_i) = X_i + (P d)_i`` (``P`` evaluates the displacement DOFs ``d`` at
-the points) the obstacle gives the gap ``g_i`` and its gradient ``n_i = grad g(x_i)``. The
-contact energy is the same augmented Lagrangian as the symbolic one::
+position ``x_i = X_i + (P d)_i`` (``P`` evaluates the displacement DOFs ``d`` at the points)
+the obstacle gives the gap ``g_i`` and the normal ``n_i = grad g(x_i)``.
 
-    Pi_c(d) = sum_i A_i S(z_i) / r,     z_i = lambda_i - r (g_i - g0_i - g_off)
+The contact pressure ``lambda_i >= 0`` is a Lagrange multiplier (exact, no penalty): the
+residual gains the contact forces and the constraints are the Signorini conditions, written
+with the complementarity function of the primal-dual active set method (semi-smooth Newton)::
 
-so, with ``s = S'``::
+    R_u = R_int(d) - P^T [A_i lambda_i n_i] = R_int - B^T lambda,     B_i = A_i n_i^T P_i
+    C_i = lambda_i - max(0, lambda_i - c g_i) = 0     (g >= 0, lambda >= 0, lambda g = 0)
 
-    R_c = P^T [ -A_i s(z_i) n_i ],       K_c = P^T [ A_i r s'(z_i) n_i n_i^T ] P
-
-(the curvature term ``-A_i s(z_i) grad^2 g`` is left out of ``K_c``: the tangent stays
-symmetric positive semi-definite and Newton loses only its quadratic rate near curved
-contact, not the solution). ``lambda_i`` is updated by Uzawa's rule ``lambda <- s(z)``; the
-force at a point is along ``n_i`` only: the contact is frictionless by construction.
-Written by hand because no library we use couples an NGSolve form to a sampled obstacle.
+Active points (``lambda_i - c g_i > 0``) satisfy ``g_i = 0``, inactive ones ``lambda_i = 0``.
+Newton's matrix for ``(d, lambda_A)`` is the symmetric saddle point
+``[[K - P^T(A lambda grad^2 g)P, -B_A^T], [-B_A, 0]]``. The curvature term ``grad^2 g`` (central
+differences of the normal) keeps Newton quadratic while the tissue slides over the curved
+skull. A penalty (augmented Lagrangian) form of the same contact stalled on the brain: the
+gap's curvature times a stiff penalty left Newton 1/16 line-search steps. The force at a point
+is along ``n_i``: the contact is frictionless by construction. Written by hand because no
+library we use couples an NGSolve form to a sampled obstacle.
 """
 
 from __future__ import annotations
@@ -43,25 +46,11 @@ class PointObstacle(Protocol):
     def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
 
-def smoothed_ramp(z: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """``s(z)`` and ``s'(z)`` of the C1 ramp used by every contact (see ``mixed``)."""
-    s = np.where(z > eps, z - eps / 2, np.where(z > 0, z * z / (2 * eps), 0.0))
-    ds = np.where(z > eps, 1.0, np.where(z > 0, z / eps, 0.0))
-    return s, ds
-
-
-def smoothed_ramp_potential(z: np.ndarray, eps: float) -> np.ndarray:
-    """``S(z)`` with ``S' = s``."""
-    return np.where(
-        z > eps, z * z / 2 - eps * z / 2 + eps**2 / 6, np.where(z > 0, z**3 / (6 * eps), 0.0)
-    )
-
-
 class PointContact:
     """Contact of the boundary ``boundary`` (regex) of ``form``'s mesh with ``obstacle``.
 
-    ``form`` provides the displacement space (first component of ``form.fes``), the penalty
-    parameter ``form.r``, the smoothing ``form.eps_c`` and the mesh size ``form.h``.
+    ``form`` provides the displacement space (first component of ``form.fes``), the state
+    ``form.gfu`` and the mesh size ``form.h``.
     """
 
     def __init__(self, form, boundary: str, obstacle: PointObstacle) -> None:
@@ -123,10 +112,11 @@ class PointContact:
             X = np.vstack([X, np.array(Xe)])
             weights = np.concatenate([weights, e_weight])
         self.X = X
+        self.vertices = verts  # mesh vertex numbers of the first points
         self.weights = weights  # lumped reference area per point [length^(dim-1)]
         self.n_points = len(X)
         self.P = sp.csr_matrix((vals, (rows, cols)), shape=(self.n_points * dim, form.fes.ndof))
-        self.lam = np.zeros(self.n_points)  # contact pressure multiplier [stress]
+        self.lam = np.zeros(self.n_points)  # contact pressure [stress]
         # initial-gap adjustment (as for the symbolic contact): points that rest on the
         # obstacle up to the geometric error of the mesh touch it exactly
         g_rest, _ = obstacle.gap_and_normal(X)
@@ -145,45 +135,72 @@ class PointContact:
     def update(self, x: np.ndarray) -> None:
         """Gap and normal at the deformed contact points of the DOF vector ``x``."""
         u = (self.P @ x).reshape(self.n_points, self.dim)
-        g, n = self.obstacle.gap_and_normal(self.X + u)
+        self.x = self.X + u
+        g, n = self.obstacle.gap_and_normal(self.x)
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(n))):
             g = np.full_like(g, np.nan)
         self.g = g - self.g0
         self.n = n
-        r = self.form.r.Get()
-        g_off = self.form.eps_c / (2 * r)  # makes g = 0 the fixed point of Uzawa
-        self.z = self.lam - r * (self.g - g_off)
 
-    def energy(self) -> float:
-        r = self.form.r.Get()
-        return float(self.weights @ smoothed_ramp_potential(self.z, self.form.eps_c) / r)
+    def add_forces(self, R: np.ndarray, lam: np.ndarray | None = None) -> None:
+        """``R -= B^T lambda = P^T [A_i lambda_i n_i]`` (the skull's push, as a residual)."""
+        lam = self.lam if lam is None else lam
+        f = (self.weights * lam)[:, None] * self.n
+        R -= self.P.T @ f.ravel()
 
-    def add_residual(self, R: np.ndarray) -> None:
-        """``R += P^T (-A s(z) n)`` for the state of the last :meth:`update`."""
-        s, _ = smoothed_ramp(self.z, self.form.eps_c)
-        f = -(self.weights * s)[:, None] * self.n
-        R += self.P.T @ f.ravel()
-
-    def tangent(self) -> sp.csr_matrix:
-        """``K_c = P^T blockdiag(A r s'(z) n n^T) P`` (full DOF numbering)."""
-        _, ds = smoothed_ramp(self.z, self.form.eps_c)
-        c = self.weights * self.form.r.Get() * ds
-        on = np.flatnonzero(c > 0)
+    def B(self, rows: np.ndarray) -> sp.csr_matrix:
+        """Constraint rows ``B_i = A_i n_i^T P_i`` for the points ``rows`` (full numbering)."""
         d = self.dim
-        blocks = c[on, None, None] * np.einsum("ni,nj->nij", self.n[on], self.n[on])
+        m = len(rows)
+        N = sp.csr_matrix(
+            (
+                (self.weights[rows, None] * self.n[rows]).ravel(),
+                (np.repeat(np.arange(m), d), (rows[:, None] * d + np.arange(d)).ravel()),
+            ),
+            shape=(m, self.n_points * d),
+        )
+        return (N @ self.P).tocsr()
+
+    def curvature(self) -> sp.csr_matrix:
+        """``P^T blockdiag(A_i lambda_i grad^2 g(x_i)) P`` over the loaded points."""
+        on = np.flatnonzero(self.lam > 0)
+        d = self.dim
+        blocks = (self.weights * self.lam)[on, None, None] * self.hessian(on)
         rows = (on[:, None, None] * d + np.arange(d)[None, :, None]).repeat(d, axis=2)
         cols = (on[:, None, None] * d + np.arange(d)[None, None, :]).repeat(d, axis=1)
         m = self.n_points * d
-        B = sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(m, m))
-        return (self.P.T @ B @ self.P).tocsr()
+        H = sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(m, m))
+        return (self.P.T @ H @ self.P).tocsr()
 
-    def update_multipliers(self) -> None:
-        """Uzawa: ``lambda <- s(z)``."""
-        self.lam = smoothed_ramp(self.z, self.form.eps_c)[0]
+    def active(self, c: float) -> np.ndarray:
+        """Active set ``lambda - c g >= 0`` (``c`` [stress/length] weighs gap against
+        pressure; points resting on the obstacle start active)."""
+        return self.lam - c * self.g >= 0
+
+    def complementarity(self, c: float) -> np.ndarray:
+        """``A_i C_i / c`` [volume]: ``A g`` on active points, ``A lambda / c`` elsewhere."""
+        return self.weights * (self.lam - np.maximum(0.0, self.lam - c * self.g)) / c
+
+    def hessian(self, on: np.ndarray) -> np.ndarray:
+        """``grad^2 g`` (m, dim, dim) at the deformed points ``on``: central differences
+        of the obstacle's normal with a step of ``1e-3 h`` (the sampled skull is C2 away
+        from its cut edge), symmetrised."""
+        if len(on) == 0:
+            return np.zeros((0, self.dim, self.dim))
+        x = self.x[on]
+        delta = 1e-3 * self.form.h
+        H = np.empty((len(on), self.dim, self.dim))
+        for k in range(self.dim):
+            e = np.zeros(self.dim)
+            e[k] = delta
+            H[:, :, k] = (
+                self.obstacle.gap_and_normal(x + e)[1] - self.obstacle.gap_and_normal(x - e)[1]
+            ) / (2 * delta)
+        return 0.5 * (H + H.transpose(0, 2, 1))
 
     def pressure(self) -> np.ndarray:
-        """Contact pressure ``s(z)`` at the points [stress]."""
-        return smoothed_ramp(self.z, self.form.eps_c)[0]
+        """Contact pressure ``lambda`` at the points [stress]."""
+        return self.lam
 
     def max_penetration(self) -> float:
         """Largest ``max(-g, 0)`` at the contact points of the current state [length]."""

@@ -98,7 +98,11 @@ class Flap:
         phi = outside + np.minimum(w.max(axis=1), 0.0)
         inside = outside == 0
         nearest = np.eye(w.shape[1])[np.argmax(w, axis=1)]
-        weight = np.where(inside[:, None], nearest, wpos / np.maximum(outside, 1e-12)[:, None])
+        # wpos / |wpos| is a unit vector for any |wpos| > 0 (a floor such as 1e-12 under the
+        # norm shrank the gradient of points within 1e-12 mm of the surface: contact's
+        # normal jumped there)
+        weight = np.where(inside[:, None], nearest,
+                          wpos / np.where(inside, 1.0, outside)[:, None])
         grad = np.einsum("nk,knd->nd", weight, np.stack(grads))
         return phi, grad
 

@@ -46,7 +46,8 @@ class BrainMesh:
     ``faces``: outer-surface triangles (outward); ``face_tet``: the tet owning each face;
     ``base``: mask of faces below the cut plane ``base_z_mm``; ``flaps``: named flaps and
     ``flap_faces`` their face masks (base faces excluded); ``voxel_volumes_ml``: tissue volumes
-    counted in the image (CSF includes the layer under the skull).
+    counted in the image (CSF includes the layer under the skull); ``midsagittal``: the plane
+    that splits the hemispheres (its normal points to the patient's right).
     """
 
     nodes_mm: np.ndarray
@@ -62,6 +63,7 @@ class BrainMesh:
     flap_faces: dict[str, np.ndarray] = field(default_factory=dict)
     voxel_volumes_ml: dict[str, float] = field(default_factory=dict)
     timings_s: dict[str, float] = field(default_factory=dict)
+    midsagittal: MidSagittalPlane = field(default_factory=MidSagittalPlane)
 
     def tet_volumes_mm3(self) -> np.ndarray:
         """Volume of each tet (mm^3)."""
@@ -184,7 +186,8 @@ def build_brain_mesh(
     voxel = image.volumes_ml()
     voxel["csf"] = envelope.volume_ml() - sum(v for k, v in voxel.items() if k != "csf")
     mesh = BrainMesh(nodes, tets, tissue, side.astype(np.int8), faces, face_tet, base,
-                     float(base_z_mm), envelope, voxel_volumes_ml=voxel)
+                     float(base_z_mm), envelope, voxel_volumes_ml=voxel,
+                     midsagittal=midsagittal)
     for s in ("left", "right"):
         mesh.add_flap(unilateral_flap(envelope, s))
     mesh.add_flap(frontal_flap(envelope, nodes, faces, ~base, frontal_area_ratio))

@@ -15,7 +15,7 @@ from brainbulge.geometry.brain.boundaries import Flap
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
 from brainbulge.geometry.brain.labels import TISSUES
-from brainbulge.geometry.brain.regions import SIDES
+from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane
 
 log = logging.getLogger("brainbulge")
 
@@ -101,6 +101,7 @@ def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = Non
         base_z_mm=mesh.base_z_mm, envelope_sdf_mm=env.sdf_mm, envelope_affine=env.affine,
         flaps_json=json.dumps({n: _flap_dict(f) for n, f in mesh.flaps.items()}),
         voxel_volumes_json=json.dumps(mesh.voxel_volumes_ml),
+        midsagittal_json=json.dumps(asdict(mesh.midsagittal)),
     )
     summary = brain_summary(mesh)
     paths["json"].write_text(json.dumps(summary, indent=2, default=_json_default))
@@ -132,6 +133,9 @@ def load_brain_mesh(path: str | Path) -> BrainMesh:
         IntracranialEnvelope(d["envelope_sdf_mm"], d["envelope_affine"]),
         voxel_volumes_ml=json.loads(str(d["voxel_volumes_json"])),
     )
+    if "midsagittal_json" in d:
+        plane = json.loads(str(d["midsagittal_json"]))
+        mesh.midsagittal = MidSagittalPlane(tuple(plane["point_mm"]), tuple(plane["normal"]))
     for f in json.loads(str(d["flaps_json"])).values():
         f = {k: tuple(v) if isinstance(v, list) else v for k, v in f.items()}
         mesh.add_flap(Flap(**f))

@@ -29,12 +29,21 @@ def to_ngsolve(brain_mesh: BrainMesh, flap: str | None = None):
     tets = np.ascontiguousarray(brain_mesh.tets[:, [0, 2, 1, 3]], dtype=np.int32)
     for i in range(len(materials)):  # elements end up grouped by material, in stable order
         ngmesh.AddElements(dim=3, index=i + 1, data=tets[mat_index == i], base=0)
+    # one face descriptor per (boundary name, region of the owning tet): NGSolve takes the
+    # region next to a boundary face from its descriptor, and a space defined on one region
+    # (the pressure of a zone) would otherwise pick up every boundary vertex
     bnames = brain_mesh.boundary_names(flap)
-    for i, bname in enumerate(BOUNDARY_NAMES, start=1):
-        ngmesh.Add(nm.FaceDescriptor(surfnr=i, domin=1, domout=0, bc=i))
-        ngmesh.SetBCName(i - 1, bname)
     faces = np.ascontiguousarray(brain_mesh.faces, dtype=np.int32)  # outward normals
-    for i, bname in enumerate(BOUNDARY_NAMES, start=1):
-        if np.any(bnames == bname):
-            ngmesh.AddElements(dim=2, index=i, data=faces[bnames == bname], base=0)
+    face_mat = mat_index[brain_mesh.face_tet]
+    fd = 0
+    for bname in BOUNDARY_NAMES:
+        on = bnames == bname
+        mats = np.unique(face_mat[on]) if on.any() else np.array([0])
+        for m in mats:
+            fd += 1
+            ngmesh.Add(nm.FaceDescriptor(surfnr=fd, domin=int(m) + 1, domout=0, bc=fd))
+            ngmesh.SetBCName(fd - 1, bname)
+            sel = on & (face_mat == m)
+            if sel.any():
+                ngmesh.AddElements(dim=2, index=fd, data=faces[sel], base=0)
     return ngsolve.Mesh(ngmesh)

@@ -2,7 +2,7 @@
 
 ``phi(x) > 0`` is penetration into the skull (mm), ``phi < 0`` is inside the intracranial space.
 Without a flap ``phi`` is the envelope's smoothed signed distance (cubic-spline interpolated on
-its grid, gradient trilinear from the grid's central differences). With a flap, the skull solid
+its grid, gradient by central differences of the same spline). With a flap, the skull solid
 ``{phi_env > 0}`` is intersected with the outside of the flap's cutting cylinder, and the convex
 cut edge is rounded with radius ``edge_radius_mm`` (the SDF of the intersection eroded and
 dilated by that radius):
@@ -33,17 +33,24 @@ class RigidSkull:
         self._inv = np.linalg.inv(envelope.affine)
         sdf = envelope.sdf_mm.astype(np.float64)
         self._coeffs = ndi.spline_filter(sdf, order=3, mode="nearest")
-        spacing_index_grads = np.gradient(sdf)
-        # world gradient = inv(A)^T grad_index
-        self._grad_index = np.stack(spacing_index_grads).astype(np.float32)
 
     def envelope_distance(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance to the intact skull's inner surface (mm, positive outside) and
         its gradient (n, 3)."""
         ijk = (points_mm @ self._inv[:3, :3].T + self._inv[:3, 3]).T
-        phi = ndi.map_coordinates(self._coeffs, ijk, order=3, mode="nearest", prefilter=False)
-        g_index = np.stack([ndi.map_coordinates(g, ijk, order=1, mode="nearest")
-                            for g in self._grad_index], axis=1)
+
+        def spline(at: np.ndarray) -> np.ndarray:
+            return ndi.map_coordinates(self._coeffs, at, order=3, mode="nearest",
+                                       prefilter=False)
+
+        phi = spline(ijk)
+        # gradient of the same C2 spline (central differences, step 1e-3 voxel), so that
+        # contact's Newton sees the derivative of the gap it evaluates
+        g_index = np.empty((ijk.shape[1], 3))
+        for k in range(3):
+            e = np.zeros((3, 1))
+            e[k] = 1e-3
+            g_index[:, k] = (spline(ijk + e) - spline(ijk - e)) / 2e-3
         grad = g_index @ self._inv[:3, :3]
         # outside the grid: add the distance to it
         shape = np.array(self.envelope.sdf_mm.shape) - 1
@@ -70,7 +77,13 @@ class RigidSkull:
         norm = np.linalg.norm(upos, axis=1)
         d = norm + np.minimum(u.max(axis=1), 0.0) - r
         first = (u[:, 0] >= u[:, 1]).astype(float)
-        weight = np.where((norm > 0)[:, None], upos / np.maximum(norm, 1e-12)[:, None],
+        weight = np.where((norm > 0)[:, None], upos / np.where(norm > 0, norm, 1.0)[:, None],
                           np.stack([first, 1 - first], axis=1))
         grad_d = np.einsum("nk,nkd->nd", weight, gu)
         return -d, -grad_d
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The contact obstacle's view (:class:`PointObstacle`): gap ``g = -phi`` (mm,
+        positive in the intracranial space or the flap opening) and ``grad g = -grad phi``."""
+        phi, grad = self.signed_distance(x)
+        return -phi, -grad

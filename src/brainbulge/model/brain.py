@@ -1,0 +1,157 @@
+"""Case C of MODEL.md section 6: white-matter swelling in a personalised brain (3D).
+
+The labelled brain mesh (:mod:`brainbulge.geometry.brain`, lengths in mm) carries regions
+``"{tissue}_{side}"`` (gray, white, csf, cerebellum, brainstem; left, right). Every region is
+an incompressible Mooney-Rivlin solid with the parameters of MODEL.md section 2 (the
+brainstem, absent from the paper's table, takes the cerebellum's), bonded to its neighbours.
+The inferior surface ``base`` is fixed; the rest of the outer surface, ``skull``, slides
+without friction on the rigid skull (:class:`RigidSkull`, evaluated at the deformed position);
+the ``flap`` is traction-free. White matter swells, ``Js: 1 -> swelling``, in the left
+hemisphere, the right, or both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from brainbulge.errors import InputError
+from brainbulge.geometry.brain import BrainMesh, to_ngsolve
+from brainbulge.materials import MooneyRivlin, preset
+from brainbulge.model.problem import Contact, Problem
+
+FLAPS = ("frontal", "left", "right", "custom")
+SWELL_SIDES = {"both": ("left", "right"), "left": ("left",), "right": ("right",)}
+
+#: tissue -> row of the material table used for it
+TISSUE_MATERIAL = {
+    "gray": "gray",
+    "white": "white",
+    "csf": "csf",
+    "cerebellum": "cerebellum",
+    "brainstem": "cerebellum",
+}
+
+
+@dataclass
+class CraniectomyCase:
+    """One 3D scenario: which flap is open, which white matter swells, and how.
+
+    Attributes:
+        flap: ``frontal``, ``left``, ``right`` or ``custom`` (needs ``flap_centre_mm``).
+        swell: white matter that swells: ``both``, ``left`` or ``right`` hemisphere.
+        swelling: target ``Js`` [-] (the paper: 1.1).
+        tets: about how many tetrahedra when the mesh is built here.
+        mesh: a ``brain.npz`` written by ``brainbulge mesh`` (overrides ``tets``).
+        labels, label_map: a NIfTI segmentation and its label map (default: ICBM152).
+        brain_volume_ml: scale the geometry to this intracranial volume [ml].
+        flap_centre_mm, flap_diameter_mm: a custom flap on the skull [mm].
+        material: material preset (``paper`` or ``paper-pa``).
+        element: ``mini`` (P1 + bubble / P1) or ``taylor-hood`` (P2 / P1).
+        steps: initial load steps.
+        edge_radius_mm: radius of the rounded cut edge of the skull at the flap [mm].
+        edge_exclusion_mm: band around the flap rim left out of ``max_*`` outputs [mm].
+        name: label of the scenario.
+    """
+
+    flap: str = "left"
+    swell: str = "both"
+    swelling: float = 1.1
+    tets: int = 30_000
+    mesh: str | None = None
+    labels: str | None = None
+    label_map: str = "synthseg"
+    brain_volume_ml: float | None = None
+    flap_centre_mm: tuple[float, float, float] | None = None
+    flap_diameter_mm: float | None = None
+    material: str = "paper"
+    element: str = "mini"
+    steps: int = 4
+    edge_radius_mm: float = 3.0
+    edge_exclusion_mm: float = 5.0
+    name: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.flap not in FLAPS:
+            raise InputError(f"unknown flap {self.flap!r}; choose one of {', '.join(FLAPS)}")
+        if self.flap == "custom" and self.flap_centre_mm is None:
+            raise InputError("a custom flap needs its centre: --flap-centre X Y Z (mm)")
+        if self.swell not in SWELL_SIDES:
+            raise InputError(
+                f"unknown swelling side {self.swell!r}; choose one of {', '.join(SWELL_SIDES)}"
+            )
+        if not (isinstance(self.swelling, (int, float)) and 0.5 <= self.swelling <= 2.0):
+            raise InputError(f"swelling Js = {self.swelling!r} must lie in [0.5, 2] (paper: 1.1)")
+        if not isinstance(self.steps, int) or self.steps < 1:
+            raise InputError(f"steps = {self.steps!r} must be a positive integer")
+        if not 0 < self.edge_radius_mm <= 10:
+            raise InputError(f"edge radius {self.edge_radius_mm} mm must lie in (0, 10]")
+        if not 0 <= self.edge_exclusion_mm <= 50:
+            raise InputError(f"edge exclusion {self.edge_exclusion_mm} mm must lie in [0, 50]")
+        if self.mesh is not None and not Path(self.mesh).exists():
+            raise InputError(f"brain mesh {self.mesh} does not exist; build one with "
+                             "`brainbulge mesh --out DIR` and pass DIR/brain.npz")
+        if not self.name:
+            self.name = f"{self.flap}-flap_{self.swell}-swelling"
+
+
+def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
+    """Load or build the labelled brain mesh of ``case``."""
+    from brainbulge.geometry.brain import (
+        build_brain_mesh,
+        load_brain_mesh,
+        load_tissue_image,
+    )
+
+    if case.mesh is not None:
+        path = Path(case.mesh)
+        bm = load_brain_mesh(path / "brain.npz" if path.is_dir() else path)
+    else:
+        image = load_tissue_image(case.labels, case.label_map) if case.labels else None
+        kwargs = {}
+        if case.flap_centre_mm is not None:
+            kwargs["custom_flap_centre_mm"] = tuple(case.flap_centre_mm)
+            if case.flap_diameter_mm is not None:
+                kwargs["custom_flap_diameter_mm"] = case.flap_diameter_mm
+        bm = build_brain_mesh(image, target_tets=case.tets,
+                              brain_volume_ml=case.brain_volume_ml, **kwargs)
+    if case.flap not in bm.flaps:
+        raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
+                         f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
+    return bm
+
+
+def tissue_materials(material: str) -> dict[str, MooneyRivlin]:
+    """Tissue name -> material of the preset (brainstem as cerebellum)."""
+    table = preset(material)
+    return {t: table[m] for t, m in TISSUE_MATERIAL.items()}
+
+
+def brain_problem(bm: BrainMesh, case: CraniectomyCase) -> Problem:
+    """The NGSolve problem of ``case`` on the brain mesh ``bm``."""
+    mesh = to_ngsolve(bm, flap=case.flap)
+    by_tissue = tissue_materials(case.material)
+    materials = {}
+    for region in set(mesh.GetMaterials()):
+        tissue = region.rsplit("_", 1)[0]
+        if tissue not in by_tissue:
+            raise InputError(f"mesh region {region!r} has no tissue material")
+        materials[region] = by_tissue[tissue]
+    swelling = {
+        f"white_{side}": float(case.swelling)
+        for side in SWELL_SIDES[case.swell]
+        if f"white_{side}" in materials
+    }
+    if not swelling:
+        raise InputError("the mesh has no white matter on the swelling side; check the labels")
+    skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
+    return Problem(mesh, materials, swelling, clamped="base", contacts=[Contact("skull", skull)])
+
+
+def white_matter_volume_ml(bm: BrainMesh, sides: tuple[str, ...]) -> float:
+    """Reference volume of the white matter on ``sides`` [ml]."""
+    vols = bm.region_volumes_ml()
+    return float(np.sum([vols.get(f"white_{s}", 0.0) for s in sides]))

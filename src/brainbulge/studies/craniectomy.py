@@ -1,0 +1,334 @@
+"""The 3D craniectomy (MODEL.md section 6): one scenario, and the paper's six as a study.
+
+``run_brain(case, out_dir)`` solves one scenario and writes ``summary.json``, ``fields.vtu``
+(ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``
+and ``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
+ranges). A run that stops early keeps the last converged state on disk, marked
+``"converged": false``, and raises :class:`~brainbulge.errors.ConvergenceError`.
+
+Clinical metrics (lengths mm, volumes ml, pressures kPa and mmHg):
+
+- ``midline_shift_mm``: largest lateral displacement of parenchyma that starts within 1 mm of
+  the mid-sagittal plane, signed (positive towards the patient's right); also at the level of
+  the foramen of Monro (``midline_shift_monro_mm``, MNI z = 12 +- 5 mm, template meshes);
+- ``bulge_volume_ml``: tissue volume outside the intact skull surface (through the flap);
+- ``swelling_volume_ml``: added volume ``int (Js - 1) dV``; ``brain_volume_ml``;
+- ``max_pressure_kpa``, ``mean_pressure_mmhg``: the hydrostatic pressure ``-p`` in the
+  parenchyma (largest, and volume mean).
+
+Stretch and strain extremes are taken over the parenchyma (gray and white matter,
+cerebellum, brainstem) outside a band of ``edge_exclusion_mm`` around the flap rim, where the
+stress is singular; ``raw_*`` over all parenchyma, ``csf_*`` over the CSF filler.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.geometry.brain import BrainMesh
+from brainbulge.model.brain import (
+    SWELL_SIDES,
+    CraniectomyCase,
+    brain_mesh_for,
+    brain_problem,
+    white_matter_volume_ml,
+)
+from brainbulge.results.brain_metrics import (
+    brain_volume_ml,
+    bulge_volume_ml,
+    midline_shift_mm,
+    monro_z_range_mm,
+)
+from brainbulge.results.export import VertexFields, vertex_fields, write_vtu
+from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.sections import plot_sections
+from brainbulge.results.summary import solution_summary
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+#: the parenchyma: where axons are and tissue extremes are taken
+PARENCHYMA = "(gray|white|cerebellum|brainstem)_(left|right)"
+KPA_TO_MMHG = 7.500617
+#: fixed colour ranges of the section figures, so that scenarios compare
+SECTION_RANGES = {
+    "|u|": (0.0, 8.0),
+    "max principal strain": (0.0, 0.3),
+    "lambda_n": (0.8, 1.2),
+    "lambda_t": (0.8, 1.2),
+}
+SCENARIOS = [
+    (flap, swell) for flap in ("left", "frontal") for swell in ("both", "left", "right")
+]
+
+
+def case_from_dict(config: dict[str, Any]) -> CraniectomyCase:
+    """A :class:`CraniectomyCase` from a plain dict (TOML table, CLI, study scenario)."""
+    names = {f.name for f in dataclasses.fields(CraniectomyCase)}
+    unknown = set(config) - names
+    if unknown:
+        raise InputError(
+            f"unknown brain option(s) {', '.join(sorted(unknown))}; "
+            f"valid: {', '.join(sorted(names))}"
+        )
+    try:
+        return CraniectomyCase(**config)
+    except TypeError as err:
+        raise InputError(f"invalid brain options: {err}") from None
+
+
+def run_brain(
+    config: dict[str, Any] | CraniectomyCase,
+    out_dir: Path,
+    progress: bool = False,
+    brain_mesh: BrainMesh | None = None,
+) -> dict[str, Any]:
+    """Solve one 3D scenario; write its files into ``out_dir``; return the summary."""
+    case = config if isinstance(config, CraniectomyCase) else case_from_dict(dict(config))
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bm = brain_mesh if brain_mesh is not None else brain_mesh_for(case)
+    problem = brain_problem(bm, case)
+    form = MixedForm(problem, element=case.element)
+    solver = NewtonSolver(form, SolverOptions(steps=case.steps, progress=progress))
+    sol = solver.solve()
+    summary = brain_summary(case, bm, form, solver, sol)
+    vf = vertex_fields(form, bm.envelope.centre_mm())
+    _add_contact_fields(vf, form)
+    write_vtu(out_dir / "fields.vtu", vf)
+    np.savez_compressed(
+        out_dir / "fields.npz",
+        points=vf.points,
+        cells=vf.cells,
+        regions=vf.regions,
+        region_names=np.array(vf.region_names),
+        **{f"point_{k}": v for k, v in vf.point_data.items()},
+    )
+    state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
+    section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
+    atomic_write_json(out_dir / "summary.json", summary)
+    if not sol.converged:
+        raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
+    return summary
+
+
+def brain_summary(
+    case: CraniectomyCase,
+    bm: BrainMesh,
+    form: MixedForm,
+    solver: NewtonSolver,
+    sol,
+) -> dict[str, Any]:
+    """``summary.json`` of a 3D scenario (see the module docstring)."""
+    skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
+    flap = bm.flaps[case.flap]
+    band = case.edge_exclusion_mm
+
+    def near_rim(X: np.ndarray) -> np.ndarray:
+        """Within ``band`` of the flap rim: the cutter surface meets the skull surface."""
+        d_cut, _ = flap.cutter_distance(X)
+        phi_env, _ = skull.envelope_distance(X)
+        return np.hypot(d_cut, phi_env) < band
+
+    out: dict[str, Any] = {
+        "case": case.name,
+        "inputs": dataclasses.asdict(case),
+        **solution_summary(
+            sol, solver, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
+            tissue=PARENCHYMA,
+        ),
+    }
+    out["edge_exclusion_mm"] = band
+    out.pop("edge_exclusion", None)
+    out.pop("singular_points", None)
+    out["swelling_reached"] = 1 + sol.load * (case.swelling - 1)
+    # vertex displacements
+    u = _vertex_displacements(form, bm)
+    parenchyma_nodes = np.zeros(len(bm.nodes_mm), dtype=bool)
+    names = bm.material_names()
+    is_par = np.array([not n.startswith("csf") for n in names])
+    parenchyma_nodes[bm.tets[is_par].ravel()] = True
+    out.update(midline_shift_mm(bm.nodes_mm, u, bm.midsagittal, region_mask=parenchyma_nodes))
+    monro = midline_shift_mm(
+        bm.nodes_mm, u, bm.midsagittal, region_mask=parenchyma_nodes, z_range_mm=monro_z_range_mm()
+    )
+    out["midline_shift_monro_mm"] = monro["midline_shift_mm"] if monro["midline_nodes"] else None
+
+    def outside(x: np.ndarray) -> np.ndarray:
+        return np.minimum(skull.envelope_distance(x)[0], -skull.signed_distance(x)[0])
+
+    out["bulge_volume_ml"] = bulge_volume_ml(bm.nodes_mm, bm.tets, u, outside)
+    out["brain_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets)
+    out["deformed_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets, u)
+    out["swelling_volume_ml"] = out.pop("swelling_volume") / 1000.0
+    out["white_matter_swelling_ml"] = white_matter_volume_ml(bm, SWELL_SIDES[case.swell])
+    out["flap_area_cm2"] = bm.flap_area_cm2(case.flap)
+    out["max_pressure_kpa"] = out.pop("max_pressure")
+    out["min_pressure_kpa"] = out.pop("min_pressure")
+    out["mean_pressure_mmhg"] = _mean_parenchyma_pressure(form) * KPA_TO_MMHG
+    out["max_penetration_mm"] = out["max_penetration"]
+    return out
+
+
+def _vertex_displacements(form: MixedForm, bm: BrainMesh) -> np.ndarray:
+    """``u`` at the brain mesh nodes (mm): the P1 vertex values (NGSolve keeps the order)."""
+    import ngsolve as ngs
+
+    V = form.fes.components[0]
+    x = form.gfu.components[0].vec.FV().NumPy()
+    dofs = np.array([V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)) for v in range(form.mesh.nv)])
+    return x[dofs]
+
+
+def _mean_parenchyma_pressure(form: MixedForm) -> float:
+    import re
+
+    import ngsolve as ngs
+
+    rx = re.compile(f"^(?:{PARENCHYMA})$")
+    mask = form.mesh.MaterialCF(
+        {r: 1.0 for r in set(form.mesh.GetMaterials()) if rx.match(r)}, default=0.0
+    )
+    vol = ngs.Integrate(mask, form.mesh)
+    return float(ngs.Integrate(-form.p * mask, form.mesh) / vol)
+
+
+def _add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
+    """Point data ``contact_pressure`` [kPa] and ``contact_status`` (1 in contact with the
+    skull, 0 separated or on the flap, -1 not on the skull boundary)."""
+    status = -np.ones(len(vf.points))
+    pressure = np.zeros(len(vf.points))
+    for pc in form.point_contacts:
+        pc.update(form.gfu.vec.FV().NumPy())
+        nv = len(pc.vertices)
+        touching = (pc.lam[:nv] > 0) | (np.abs(pc.g[:nv]) < 1e-6 * form.h)
+        status[pc.vertices] = touching.astype(float)
+        pressure[pc.vertices] = pc.lam[:nv]
+    vf.point_data["contact_pressure"] = pressure
+    vf.point_data["contact_status"] = status
+
+
+def section_figure(
+    vf: VertexFields, bm: BrainMesh, case: CraniectomyCase, path: Path, title: str = ""
+) -> Path:
+    """Transverse and sagittal sections through the flap centre (fixed colour ranges)."""
+    pd = vf.point_data
+    fields = {
+        "|u|": pd["u_magnitude"],
+        "max principal strain": pd["max_principal_strain"],
+        "lambda_n": pd["lambda_n"],
+        "lambda_t": pd["lambda_t"],
+    }
+    centre = np.asarray(bm.flaps[case.flap].centre_mm, dtype=float)
+    # cut through the flap centre pulled half way towards the brain centre (inside tissue)
+    centre = 0.5 * (centre + bm.envelope.centre_mm())
+    return plot_sections(
+        vf.points, vf.cells, pd["u"], fields, centre, path, ranges=SECTION_RANGES, title=title
+    )
+
+
+# --- study ------------------------------------------------------------------------------
+def craniectomy_scenarios(**common: Any) -> list[dict[str, Any]]:
+    """The six scenarios {left unilateral, frontal} x {both, left, right}."""
+    return [
+        {"name": f"{flap}-flap_{swell}-swelling", **common, "flap": flap, "swell": swell}
+        for flap, swell in SCENARIOS
+    ]
+
+
+def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
+    """Runner task: one 3D scenario (``name`` is the folder, the rest the case)."""
+    config = dict(scenario)
+    summary = run_brain(config, scenario_dir)
+    return {k: v for k, v in summary.items() if k != "inputs"}
+
+
+#: summary keys of the comparison table and figure (label, unit)
+COMPARISON = {
+    "midline_shift_mm": ("midline shift", "mm"),
+    "bulge_volume_ml": ("bulge volume", "ml"),
+    "max_displacement": ("max |u|", "mm"),
+    "max_principal_strain": ("max principal strain", "-"),
+    "max_radial_stretch": ("max lambda_n", "-"),
+    "max_tangential_stretch": ("max lambda_t", "-"),
+    "max_pressure_kpa": ("max pressure", "kPa"),
+}
+
+
+def prepare_study_mesh(out_dir: Path, common: dict[str, Any]) -> Path:
+    """Build the study's brain mesh once (``out_dir/mesh/brain.npz``); reuse it on resume."""
+    from brainbulge.geometry.brain import save_brain_mesh
+
+    path = Path(out_dir) / "mesh" / "brain.npz"
+    if common.get("mesh"):
+        return Path(common["mesh"])
+    if not path.is_file():
+        case = case_from_dict({k: v for k, v in common.items() if k != "mesh"})
+        save_brain_mesh(brain_mesh_for(case), path.parent)
+    return path
+
+
+def write_comparison(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[Path]:
+    """``table.csv`` (inputs and summary keys per scenario) and ``comparison.png``."""
+    import csv
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k, v in r.items() if k not in keys and not isinstance(v, (list, dict))]
+    with open(out_dir / "table.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["name", "flap", "swell", *keys])
+        for sc, r in zip(scenarios, rows, strict=True):
+            w.writerow([sc["name"], sc["flap"], sc["swell"], *[r.get(k) for k in keys]])
+    done = [(sc, r) for sc, r in zip(scenarios, rows, strict=True) if r.get("complete")]
+    fig, axes = plt.subplots(1, len(COMPARISON), figsize=(3.0 * len(COMPARISON), 3.6))
+    labels = [f"{sc['flap']}\n{sc['swell']}" for sc, _ in done]
+    colours = ["#1f77b4" if sc["flap"] == "left" else "#d62728" for sc, _ in done]
+    for ax, (key, (label, unit)) in zip(axes, COMPARISON.items(), strict=True):
+        vals = [float(r.get(key) or 0.0) for _, r in done]
+        ax.bar(range(len(vals)), vals, color=colours)
+        ax.set_xticks(range(len(vals)), labels, fontsize=7)
+        ax.set_title(f"{label} [{unit}]", fontsize=9)
+        ax.axhline(0, color="k", lw=0.5)
+    fig.suptitle("craniectomy scenarios: flap (blue left, red frontal) x swelling side")
+    fig.tight_layout()
+    fig.savefig(out_dir / "comparison.png", dpi=110)
+    plt.close(fig)
+    return [out_dir / "table.csv", out_dir / "comparison.png"]
+
+
+def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path:
+    """``report.md``: the comparison table and figure, and each scenario's sections."""
+    out_dir = Path(out_dir)
+    lines = [
+        "# Craniectomy scenarios",
+        "",
+        "White-matter swelling Js 1 -> 1.1, frictionless sliding on the rigid skull, "
+        "traction-free flap (MODEL.md section 6). Midline shift: positive towards the "
+        "patient's right.",
+        "",
+        "| scenario | " + " | ".join(f"{lab} [{u}]" for lab, u in COMPARISON.values()) + " |",
+        "|---" * (len(COMPARISON) + 1) + "|",
+    ]
+    for sc, r in zip(scenarios, rows, strict=True):
+        if not r.get("complete"):
+            lines.append(f"| {sc['name']} | failed: {r.get('error', '')} |")
+            continue
+        vals = " | ".join(f"{float(r.get(k) or 0):.4g}" for k in COMPARISON)
+        lines.append(f"| {sc['name']} | {vals} |")
+    lines += ["", "![comparison](comparison.png)", ""]
+    for sc, r in zip(scenarios, rows, strict=True):
+        if r.get("complete"):
+            lines += [f"## {sc['name']}", "", f"![{sc['name']}]({sc['name']}/sections.png)", ""]
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines))
+    return path
