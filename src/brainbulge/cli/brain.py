@@ -20,8 +20,9 @@ def add_parser(sub: Any) -> None:
         "brain", help="3D craniectomy: white-matter swelling bulging through a flap",
         description=__doc__,
     )
-    p.add_argument("--flap", choices=("frontal", "left", "right", "custom"), default="left",
-                   help="the craniectomy (custom needs --flap-centre)")
+    p.add_argument("--flap", choices=("frontal", "left", "right", "custom", "none"),
+                   default="left",
+                   help="the craniectomy (custom needs --flap-centre; none: intact skull)")
     p.add_argument("--swell", choices=("both", "left", "right"), default="both",
                    help="hemisphere(s) whose white matter swells")
     p.add_argument("--swelling", type=positive_float("--swelling"), default=1.1,

@@ -22,7 +22,7 @@ from brainbulge.geometry.brain import BrainMesh, to_ngsolve
 from brainbulge.materials import MooneyRivlin, preset
 from brainbulge.model.problem import Contact, Problem
 
-FLAPS = ("frontal", "left", "right", "custom")
+FLAPS = ("frontal", "left", "right", "custom", "none")
 SWELL_SIDES = {"both": ("left", "right"), "left": ("left",), "right": ("right",)}
 
 #: tissue -> row of the material table used for it
@@ -40,7 +40,8 @@ class CraniectomyCase:
     """One 3D scenario: which flap is open, which white matter swells, and how.
 
     Attributes:
-        flap: ``frontal``, ``left``, ``right`` or ``custom`` (needs ``flap_centre_mm``).
+        flap: ``frontal``, ``left``, ``right``, ``custom`` (needs ``flap_centre_mm``) or
+            ``none`` (intact skull: infeasible with swelling, reported as such).
         swell: white matter that swells: ``both``, ``left`` or ``right`` hemisphere.
         swelling: target ``Js`` [-] (the paper: 1.1).
         tets: about how many tetrahedra when the mesh is built here.
@@ -118,7 +119,7 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
                 kwargs["custom_flap_diameter_mm"] = case.flap_diameter_mm
         bm = build_brain_mesh(image, target_tets=case.tets,
                               brain_volume_ml=case.brain_volume_ml, **kwargs)
-    if case.flap not in bm.flaps:
+    if case.flap != "none" and case.flap not in bm.flaps:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
                          f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
     return bm
@@ -132,7 +133,8 @@ def tissue_materials(material: str) -> dict[str, MooneyRivlin]:
 
 def brain_problem(bm: BrainMesh, case: CraniectomyCase) -> Problem:
     """The NGSolve problem of ``case`` on the brain mesh ``bm``."""
-    mesh = to_ngsolve(bm, flap=case.flap)
+    flap = None if case.flap == "none" else case.flap
+    mesh = to_ngsolve(bm, flap=flap)
     by_tissue = tissue_materials(case.material)
     materials = {}
     for region in set(mesh.GetMaterials()):
@@ -147,7 +149,7 @@ def brain_problem(bm: BrainMesh, case: CraniectomyCase) -> Problem:
     }
     if not swelling:
         raise InputError("the mesh has no white matter on the swelling side; check the labels")
-    skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
+    skull = bm.skull(flap, edge_radius_mm=case.edge_radius_mm)
     return Problem(mesh, materials, swelling, clamped="base", contacts=[Contact("skull", skull)])
 
 

@@ -141,6 +141,7 @@ def brain_summary(
             tissue=PARENCHYMA,
         ),
     }
+    out.setdefault("csf_max_principal_strain", None)  # a mesh may have no CSF
     out["edge_exclusion_mm"] = band
     out.pop("edge_exclusion", None)
     out.pop("singular_points", None)
