@@ -12,10 +12,11 @@ def test_demo_quick_report(tmp_path) -> None:
     assert main(["demo", "--quick", "--out", str(out)]) == 0
     report = (out / "report.md").read_text()
     images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
-    assert len(images) >= 5
+    assert len(images) >= 8
     for img in images:
         assert (out / img).is_file() and (out / img).stat().st_size > 1000, img
     assert "| headline_noslip |" in report and "failed" not in report
-    for sub in ("headline", "sweep"):
+    assert "| left-flap_left-swelling |" in report
+    for sub in ("headline", "sweep", "brain"):
         assert (out / sub / "table.csv").is_file()
         assert (out / sub / "study.json").is_file()

@@ -119,9 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
-    from brainbulge.cli import brain, demo, hemidisk, run, study
+    from brainbulge.cli import brain, demo, hemidisk, reproduce, run, study
 
-    for module in (hemidisk, brain, study, demo, run):
+    for module in (hemidisk, brain, study, demo, reproduce, run):
         module.add_parser(sub)
     try:  # the MRI geometry command, when its module is present
         from brainbulge.cli import mesh
