@@ -13,8 +13,8 @@ Clinical metrics (lengths mm, volumes ml, pressures kPa and mmHg):
   the foramen of Monro (``midline_shift_monro_mm``, MNI z = 12 +- 5 mm, template meshes);
 - ``bulge_volume_ml``: tissue volume outside the intact skull surface (through the flap);
 - ``swelling_volume_ml``: added volume ``int (Js - 1) dV``; ``brain_volume_ml``;
-- ``max_pressure_kpa``, ``mean_pressure_mmhg``: the hydrostatic pressure ``-p`` in the
-  parenchyma (largest, and volume mean).
+- ``max_pressure_kpa``: the largest hydrostatic pressure ``-p`` (whole brain, CSF included);
+  ``mean_pressure_mmhg``: its volume mean over the parenchyma.
 
 Stretch and strain extremes are taken over the parenchyma (gray and white matter,
 cerebellum, brainstem) outside a band of ``edge_exclusion_mm`` around the flap rim, where the
@@ -141,7 +141,8 @@ def brain_summary(
             tissue=PARENCHYMA,
         ),
     }
-    out.setdefault("csf_max_principal_strain", None)  # a mesh may have no CSF
+    # the issue's name for the CSF strain (None when the mesh has no CSF)
+    out["csf_max_principal_strain"] = out.get("max_csf_principal_strain")
     out["edge_exclusion_mm"] = band
     out.pop("edge_exclusion", None)
     out.pop("singular_points", None)
@@ -199,7 +200,7 @@ def _mean_parenchyma_pressure(form: MixedForm) -> float:
 
 def _add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
     """Point data ``contact_pressure`` [kPa] and ``contact_status`` (1 in contact with the
-    skull, 0 separated or on the flap, -1 not on the skull boundary)."""
+    skull, 0 separated from it, -1 not on the skull boundary: flap, base, interior)."""
     status = -np.ones(len(vf.points))
     pressure = np.zeros(len(vf.points))
     for pc in form.point_contacts:
@@ -313,7 +314,8 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
     lines = [
         "# Craniectomy scenarios",
         "",
-        "White-matter swelling Js 1 -> 1.1, frictionless sliding on the rigid skull, "
+        f"White-matter swelling Js 1 -> {scenarios[0].get('swelling', 1.1):g}, frictionless "
+        "sliding on the rigid skull, "
         "traction-free flap (MODEL.md section 6). Midline shift: positive towards the "
         "patient's right.",
         "",

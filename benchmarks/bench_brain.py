@@ -1,0 +1,76 @@
+"""Benchmark of one 3D craniectomy scenario (left flap, both-sided swelling, Js 1 -> 1.1).
+
+Run ``python benchmarks/bench_brain.py [--sizes 30000 100000 400000] [--steps 2]``. Each size
+runs in a fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from
+``--cache DIR``), then solved with MINI elements and exact contact multipliers. The table
+gives tets, DOFs, mesh time, solve time (assembly / linear solve), Newton iterations, peak
+resident memory, the midline shift and the bulge volume.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def one(target_tets: int, steps: int, cache: Path) -> dict:
+    from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
+    from brainbulge.studies.craniectomy import run_brain
+
+    t0 = time.perf_counter()
+    path = cache / f"brain_{target_tets}" / "brain.npz"
+    if path.is_file():
+        bm = load_brain_mesh(path)
+    else:
+        bm = build_brain_mesh(target_tets=target_tets)
+        save_brain_mesh(bm, path.parent, figures=False)
+    t_mesh = time.perf_counter() - t0
+    out = cache / f"run_{target_tets}"
+    s = run_brain({"flap": "left", "swell": "both", "steps": steps}, out, brain_mesh=bm)
+    return {
+        "tets": s["elements"], "dofs": s["dofs"], "mesh_s": t_mesh, "solve_s": s["wall_time_s"],
+        "assembly_s": s["assembly_time_s"], "linear_s": s["linear_solve_time_s"],
+        "newton": s["newton_iterations"], "steps": s["load_steps"],
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "shift_mm": s["midline_shift_mm"], "bulge_ml": s["bulge_volume_ml"],
+        "penetration_mm": s["max_penetration_mm"],
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[30_000, 100_000, 400_000])
+    parser.add_argument("--steps", type=int, default=2)
+    parser.add_argument("--cache", type=Path, default=Path("bench-brain"))
+    parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        print("RESULT " + json.dumps(one(args.one, args.steps, args.cache)), flush=True)
+        return 0
+    print(f"{'target':>8} {'tets':>8} {'dofs':>8} {'mesh s':>7} {'solve s':>8} {'asm s':>7} "
+          f"{'lin s':>7} {'newton':>6} {'peak MB':>8} {'shift mm':>8} {'bulge ml':>8} "
+          f"{'pen mm':>8}", flush=True)
+    for n in args.sizes:
+        cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
+               "--cache", str(args.cache)]
+        res = subprocess.run(cmd, capture_output=True, text=True)
+        lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
+        if not lines:
+            tail = (res.stderr.strip().splitlines() or ["?"])[-1]
+            print(f"{n:>8} failed: {tail}", flush=True)
+            continue
+        r = json.loads(lines[-1][7:])
+        print(f"{n:>8} {r['tets']:>8} {r['dofs']:>8} {r['mesh_s']:>7.0f} {r['solve_s']:>8.0f} "
+              f"{r['assembly_s']:>7.0f} {r['linear_s']:>7.0f} {r['newton']:>6} "
+              f"{r['peak_mb']:>8.0f} {r['shift_mm']:>8.2f} {r['bulge_ml']:>8.1f} "
+              f"{r['penetration_mm']:>8.1e}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

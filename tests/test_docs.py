@@ -1,0 +1,160 @@
+"""The documentation cannot drift from the code.
+
+- Every ```python block of the pages in ``PYTHON_PAGES`` runs: the blocks of a page in order,
+  sharing one namespace, in a temporary folder. They run as a module named ``docs_example``
+  (not ``__main__``), so code under ``if __name__ == "__main__":`` (a full study on a Dask
+  cluster, in docs/studies.md) is compiled but not run.
+- Every ``brainbulge ...`` command in the ```console / ```bash / ```sh blocks of README.md and
+  docs/*.md parses with the real CLI parser and selects a command.
+- ```json blocks of the pages parse; label maps among them are accepted by ``read_label_map``.
+- Relative links between the pages point to existing files and headings.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from brainbulge.cli import build_parser
+from brainbulge.geometry.brain.labels import read_label_map
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+PAGES = [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+PYTHON_PAGES = ["own-mri.md", "studies.md"]
+SHELL_LANGS = {"console", "bash", "sh", "shell"}
+#: pages that must show at least this many ``brainbulge`` commands (guards the extractor)
+MIN_COMMANDS = {"own-mri.md": 5, "studies.md": 4, "README.md": 5}
+
+FENCE = re.compile(r"^```([\w+-]*)[^\n]*\n(.*?)^```", re.S | re.M)
+
+
+def blocks(page: Path, langs: set[str]) -> list[tuple[int, str]]:
+    """``(line number of the first code line, code)`` of the fenced blocks in ``langs``."""
+    text = page.read_text(encoding="utf-8")
+    out = []
+    for m in FENCE.finditer(text):
+        if m.group(1).lower() in langs:
+            out.append((text.count("\n", 0, m.start(2)) + 1, m.group(2)))
+    return out
+
+
+def brainbulge_commands(page: Path) -> list[tuple[int, list[str]]]:
+    """``(line, argv without the program name)`` of every ``brainbulge`` command in the
+    shell blocks of ``page``: prompts (``$``), comments, continuation lines, environment
+    assignments and ``&&``/``;``/``|`` chains are handled."""
+    found = []
+    for first, code in blocks(page, SHELL_LANGS):
+        logical: list[tuple[int, str]] = []  # (offset of the first physical line, line)
+        pending = None
+        for offset, raw in enumerate(code.splitlines()):
+            start, text = pending if pending else (offset, "")
+            text += raw
+            if text.endswith("\\"):
+                pending = (start, text[:-1] + " ")
+                continue
+            pending = None
+            logical.append((start, text))
+        for offset, line in logical:
+            line = line.strip()
+            if line.startswith("$ "):
+                line = line[2:]
+            try:
+                tokens = shlex.split(line, comments=True)
+            except ValueError as err:  # unbalanced quotes
+                pytest.fail(f"{page.name}:{first + offset}: cannot split {line!r}: {err}")
+            segment: list[str] = []
+            for tok in [*tokens, ";"]:
+                if tok in ("&&", "||", ";", "|"):
+                    while segment and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*=.*", segment[0]):
+                        segment.pop(0)  # VAR=value before the command
+                    if segment and segment[0] == "brainbulge":
+                        found.append((first + offset, segment[1:]))
+                    segment = []
+                else:
+                    segment.append(tok)
+    return found
+
+
+COMMANDS = [(page, line, argv) for page in PAGES for line, argv in brainbulge_commands(page)]
+
+
+@pytest.mark.parametrize(
+    "page,line,argv",
+    COMMANDS,
+    ids=[f"{p.name}:{line}" for p, line, _ in COMMANDS],
+)
+def test_command_parses(page: Path, line: int, argv: list[str], capsys) -> None:
+    parser = build_parser()
+    if {"-h", "--help", "--version"} & set(argv):
+        with pytest.raises(SystemExit) as exc:
+            parser.parse_args(argv)
+        assert exc.value.code == 0
+        return
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit:
+        err = capsys.readouterr().err.strip().splitlines()
+        pytest.fail(
+            f"{page.name}:{line}: `brainbulge {shlex.join(argv)}` does not parse: "
+            f"{err[-1] if err else ''}"
+        )
+    assert callable(getattr(args, "func", None)), f"{page.name}:{line}: no command selected"
+
+
+@pytest.mark.parametrize("name,least", MIN_COMMANDS.items())
+def test_pages_show_commands(name: str, least: int) -> None:
+    page = ROOT / name if name == "README.md" else DOCS / name
+    assert len(brainbulge_commands(page)) >= least
+
+
+@pytest.mark.parametrize("name", PYTHON_PAGES)
+def test_python_examples_run(name: str, tmp_path: Path, monkeypatch) -> None:
+    page = DOCS / name
+    code_blocks = blocks(page, {"python"})
+    assert code_blocks, f"{name} has no python block"
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {"__name__": "docs_example"}
+    for first, code in code_blocks:
+        # pad so that tracebacks give the line numbers of the Markdown page
+        exec(compile("\n" * (first - 1) + code, str(page), "exec"), namespace)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.name for p in PAGES])
+def test_json_blocks(page: Path) -> None:
+    for first, code in blocks(page, {"json"}):
+        try:
+            data = json.loads(code)
+        except ValueError as err:
+            pytest.fail(f"{page.name}:{first}: invalid JSON: {err}")
+        if isinstance(data, dict) and "gray" in data:
+            read_label_map(data)
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading."""
+    text = heading.strip().lower().replace("`", "")
+    text = re.sub(r"[^\w\- ]", "", text)
+    return text.replace(" ", "-")
+
+
+def _anchors(page: Path) -> set[str]:
+    text = FENCE.sub("", page.read_text(encoding="utf-8"))
+    return {_slug(h) for h in re.findall(r"^#{1,6} (.+)$", text, re.M)}
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.name for p in PAGES])
+def test_relative_links(page: Path) -> None:
+    text = FENCE.sub("", page.read_text(encoding="utf-8"))
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"[a-z]+:", target):
+            continue  # https:, mailto:
+        path, _, anchor = target.partition("#")
+        dest = (page.parent / path).resolve() if path else page
+        assert dest.is_file(), f"{page.name}: link to missing {target}"
+        if anchor and dest.suffix == ".md":
+            assert anchor in _anchors(dest), f"{page.name}: no heading for #{anchor}"
