@@ -108,7 +108,8 @@ def mesh_intracranial_volume(envelope: IntracranialEnvelope, h_mm: float, optste
             break
     if best is None:
         raise MeshError("Netgen failed to mesh the intracranial volume: ask for another --tets, "
-                        "or check the label image for thin or disconnected pieces")
+                        "or check the label image and --label-map (thin or disconnected pieces, a "
+                        "preset that maps only part of the brain)")
     nodes, tets = best
     used = np.unique(tets)
     if len(used) < len(nodes):  # drop nodes orphaned by removed slivers
@@ -141,6 +142,42 @@ def remove_surface_slivers(nodes: np.ndarray, tets: np.ndarray, min_dihedral_deg
 
 def _netgen_tets(envelope: IntracranialEnvelope, h_mm: float, step: int, optsteps: int
                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Netgen's tets, computed in a forked child process: on some surfaces (e.g. a label
+    map read with the wrong preset) Netgen aborts the whole process ("GetChartNr(-1)"), which
+    must become a failed attempt, not a crash without a message."""
+    import os
+    import pickle
+
+    empty = np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64)
+    if not hasattr(os, "fork"):  # pragma: no cover - Windows: run in this process
+        return _netgen_tets_here(envelope, h_mm, step, optsteps)
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # child: mesh, send the arrays, leave without cleanup handlers
+        import faulthandler
+
+        faulthandler.disable()  # a Netgen abort here is expected and reported by the parent
+        os.close(read_fd)
+        code = 0
+        try:
+            data = pickle.dumps(_netgen_tets_here(envelope, h_mm, step, optsteps))
+            with os.fdopen(write_fd, "wb") as fh:
+                fh.write(data)
+        except BaseException:
+            code = 1
+        os._exit(code)
+    os.close(write_fd)
+    with os.fdopen(read_fd, "rb") as fh:
+        data = fh.read()
+    _, status = os.waitpid(pid, 0)
+    if status != 0 or not data:
+        log.warning("netgen: the meshing process failed (status %d)", status)
+        return empty
+    return pickle.loads(data)
+
+
+def _netgen_tets_here(envelope: IntracranialEnvelope, h_mm: float, step: int, optsteps: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
     import netgen.meshing as nm
     from netgen.stl import STLGeometry
 
