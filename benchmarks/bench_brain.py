@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 
-def one(target_tets: int, steps: int, cache: Path) -> dict:
+def one(target_tets: int, steps: int, cache: Path, linear: str = "pardiso") -> dict:
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
     from brainbulge.studies.craniectomy import run_brain
 
@@ -30,15 +30,16 @@ def one(target_tets: int, steps: int, cache: Path) -> dict:
         bm = build_brain_mesh(target_tets=target_tets)
         save_brain_mesh(bm, path.parent, figures=False)
     t_mesh = time.perf_counter() - t0
-    out = cache / f"run_{target_tets}"
-    s = run_brain({"flap": "left", "swell": "both", "steps": steps}, out, brain_mesh=bm)
+    out = cache / f"run_{target_tets}_{linear}"
+    s = run_brain({"flap": "left", "swell": "both", "steps": steps, "linear_solver": linear},
+                  out, brain_mesh=bm)
     return {
         "tets": s["elements"], "dofs": s["dofs"], "mesh_s": t_mesh, "solve_s": s["wall_time_s"],
         "assembly_s": s["assembly_time_s"], "linear_s": s["linear_solve_time_s"],
         "newton": s["newton_iterations"], "steps": s["load_steps"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "shift_mm": s["midline_shift_mm"], "bulge_ml": s["bulge_volume_ml"],
-        "penetration_mm": s["max_penetration_mm"],
+        "penetration_mm": s["max_penetration_mm"], "linear": linear,
     }
 
 
@@ -47,25 +48,30 @@ def main() -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[30_000, 100_000, 400_000])
     parser.add_argument("--steps", type=int, default=2)
     parser.add_argument("--cache", type=Path, default=Path("bench-brain"))
+    parser.add_argument("--linear", nargs="+", default=["pardiso", "krylov"],
+                        help="linear solvers to compare")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        print("RESULT " + json.dumps(one(args.one, args.steps, args.cache)), flush=True)
+        r = one(args.one, args.steps, args.cache, args.linear[0])
+        print("RESULT " + json.dumps(r), flush=True)
         return 0
-    print(f"{'target':>8} {'tets':>8} {'dofs':>8} {'mesh s':>7} {'solve s':>8} {'asm s':>7} "
+    print(f"{'target':>8} {'linear':>8} {'tets':>8} {'dofs':>8} {'mesh s':>7} {'solve s':>8} "
+          f"{'asm s':>7} "
           f"{'lin s':>7} {'newton':>6} {'peak MB':>8} {'shift mm':>8} {'bulge ml':>8} "
           f"{'pen mm':>8}", flush=True)
-    for n in args.sizes:
+    for n, linear in ((n, lin) for n in args.sizes for lin in args.linear):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
-               "--cache", str(args.cache)]
+               "--cache", str(args.cache), "--linear", linear]
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:
             tail = (res.stderr.strip().splitlines() or ["?"])[-1]
-            print(f"{n:>8} failed: {tail}", flush=True)
+            print(f"{n:>8} {linear:>8} failed: {tail}", flush=True)
             continue
         r = json.loads(lines[-1][7:])
-        print(f"{n:>8} {r['tets']:>8} {r['dofs']:>8} {r['mesh_s']:>7.0f} {r['solve_s']:>8.0f} "
+        print(f"{n:>8} {linear:>8} {r['tets']:>8} {r['dofs']:>8} {r['mesh_s']:>7.0f} "
+              f"{r['solve_s']:>8.0f} "
               f"{r['assembly_s']:>7.0f} {r['linear_s']:>7.0f} {r['newton']:>6} "
               f"{r['peak_mb']:>8.0f} {r['shift_mm']:>8.2f} {r['bulge_ml']:>8.1f} "
               f"{r['penetration_mm']:>8.1e}", flush=True)

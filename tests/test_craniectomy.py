@@ -159,3 +159,46 @@ def test_mislabelled_image_is_a_mesh_error_not_a_crash(tmp_path, capsys) -> None
     assert rc == 5
     assert "--label-map" in err[-1] and "Traceback" not in "\n".join(err)
     assert json.loads((out / "status.json").read_text())["status"] == "failed"
+
+
+def _vector_image(tmp_path, field) -> str:
+    g = np.arange(-80.0, 81.0, 4.0)
+    X = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1)
+    affine = np.diag([4.0, 4.0, 4.0, 1.0])
+    affine[:3, 3] = g[0]
+    path = tmp_path / "v1.nii.gz"
+    nib.save(nib.Nifti1Image(field(X).astype(np.float32), affine), path)
+    return str(path)
+
+
+def test_fibre_image_directions(tmp_path) -> None:
+    from brainbulge.errors import InputError
+    from brainbulge.geometry.brain.fibres import FibreField
+    from brainbulge.results.fields import radial_directions
+
+    def radial_inside(X):
+        v = -X  # sign is irrelevant; zero outside a ball -> radial fallback
+        v[np.linalg.norm(X, axis=-1) > 60] = 0
+        return v
+
+    f = FibreField(_vector_image(tmp_path, radial_inside), np.zeros(3))
+    pts = np.random.default_rng(0).uniform(-70, 70, (500, 3))
+    n = f(pts)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1)
+    cos = np.abs(np.einsum("ij,ij->i", n, radial_directions(pts, np.zeros(3))))
+    assert np.all(cos[np.linalg.norm(pts, axis=1) > 20] > 0.99)  # voxel-centre error only
+    bad = tmp_path / "bad.nii.gz"
+    nib.save(nib.Nifti1Image(np.zeros((4, 4, 4), np.float32), np.eye(4)), bad)
+    with pytest.raises(InputError, match="expected"):
+        FibreField(bad, np.zeros(3))
+
+
+def test_fibres_change_lambda_n(symmetric_brain, shifts, tmp_path) -> None:
+    path = _vector_image(tmp_path, lambda X: np.broadcast_to([0.0, 0.0, 1.0], X.shape).copy())
+    s = run_brain({"flap": "frontal", "swell": "left", "steps": 2, "fibres": path},
+                  tmp_path / "run", brain_mesh=symmetric_brain)
+    d = np.load(tmp_path / "run" / "fields.npz")
+    # with vertical fibres lambda_n is the vertical stretch of the vertex-averaged F
+    assert s["max_radial_stretch"] != pytest.approx(shifts["left"]["max_radial_stretch"])
+    assert s["midline_shift_mm"] == pytest.approx(shifts["left"]["midline_shift_mm"])
+    assert np.all(d["point_lambda_n"] > 0)

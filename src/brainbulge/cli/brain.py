@@ -40,8 +40,13 @@ def add_parser(sub: Any) -> None:
                    help="centre of a custom flap on the skull [mm, RAS]")
     p.add_argument("--flap-diameter", type=positive_float("--flap-diameter"), default=None,
                    help="diameter of a custom flap [mm]")
+    p.add_argument("--fibres", default=None,
+                   help="4D NIfTI (nx, ny, nz, 3) of axon directions, e.g. DTI V1, in world "
+                   "axes (default: radial from the brain's centre)")
     p.add_argument("--steps", type=int, default=4, help="initial number of load steps")
     p.add_argument("--element", choices=("mini", "taylor-hood"), default="mini")
+    p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="pardiso",
+                   help="direct, or GMRES with AMG blocks for large meshes (MINI)")
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")
     p.add_argument("--edge-exclusion", type=float, default=5.0,
                    help="band around the flap rim left out of max_*/min_* [mm]")
@@ -63,8 +68,10 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "brain_volume_ml": args.brain_volume,
         "flap_centre_mm": tuple(args.flap_centre) if args.flap_centre else None,
         "flap_diameter_mm": args.flap_diameter,
+        "fibres": args.fibres,
         "steps": args.steps,
         "element": args.element,
+        "linear_solver": args.linear_solver,
         "material": args.material,
         "edge_exclusion_mm": args.edge_exclusion,
         "edge_radius_mm": args.skull_edge_radius,

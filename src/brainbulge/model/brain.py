@@ -49,8 +49,12 @@ class CraniectomyCase:
         labels, label_map: a NIfTI segmentation and its label map (default: ICBM152).
         brain_volume_ml: scale the geometry to this intracranial volume [ml].
         flap_centre_mm, flap_diameter_mm: a custom flap on the skull [mm].
+        fibres: a 4D NIfTI (nx, ny, nz, 3) of axon directions (e.g. DTI V1) in world axes;
+            ``lambda_n`` and ``lambda_t`` use them instead of the radial direction.
         material: material preset (``paper`` or ``paper-pa``).
         element: ``mini`` (P1 + bubble / P1) or ``taylor-hood`` (P2 / P1).
+        linear_solver: ``pardiso`` (direct) or ``krylov`` (GMRES + AMG blocks, MINI only,
+            for large meshes).
         steps: initial load steps.
         edge_radius_mm: radius of the rounded cut edge of the skull at the flap [mm].
         edge_exclusion_mm: band around the flap rim left out of ``max_*`` outputs [mm].
@@ -67,8 +71,10 @@ class CraniectomyCase:
     brain_volume_ml: float | None = None
     flap_centre_mm: tuple[float, float, float] | None = None
     flap_diameter_mm: float | None = None
+    fibres: str | None = None
     material: str = "paper"
     element: str = "mini"
+    linear_solver: str = "pardiso"
     steps: int = 4
     edge_radius_mm: float = 3.0
     edge_exclusion_mm: float = 5.0
@@ -86,6 +92,10 @@ class CraniectomyCase:
             )
         if not (isinstance(self.swelling, (int, float)) and 0.5 <= self.swelling <= 2.0):
             raise InputError(f"swelling Js = {self.swelling!r} must lie in [0.5, 2] (paper: 1.1)")
+        if self.linear_solver not in ("pardiso", "krylov"):
+            raise InputError(f"linear solver {self.linear_solver!r}: choose pardiso or krylov")
+        if self.linear_solver == "krylov" and self.element != "mini":
+            raise InputError("the krylov linear solver needs --element mini")
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
         if not 0 < self.edge_radius_mm <= 10:
@@ -95,6 +105,8 @@ class CraniectomyCase:
         if self.mesh is not None and not Path(self.mesh).exists():
             raise InputError(f"brain mesh {self.mesh} does not exist; build one with "
                              "`brainbulge mesh --out DIR` and pass DIR/brain.npz")
+        if self.fibres is not None and not Path(self.fibres).is_file():
+            raise InputError(f"fibre image {self.fibres} does not exist")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
 

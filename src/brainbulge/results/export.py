@@ -8,6 +8,7 @@ deformed shape.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,8 +42,10 @@ def vertex_fields(
     form: MixedForm,
     centre: np.ndarray,
     extra: dict[str, ngs.CoefficientFunction] | None = None,
+    fibres: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> VertexFields:
-    """Evaluate the outputs of MODEL.md section 3 at the vertices of every element."""
+    """Evaluate the outputs of MODEL.md section 3 at the vertices of every element
+    (``fibres(X)``: unit axon directions replacing the radial default)."""
     mesh = form.mesh
     dim = mesh.dim
     points = np.array([v.point for v in mesh.vertices])[:, :dim]
@@ -54,7 +57,7 @@ def vertex_fields(
     ir = ngs.IntegrationRule([tuple(list(p) + [0.0] * (3 - dim)) for p in ref], [1.0] * len(ref))
     mips = mesh.MapToAllElements(ir, ngs.VOL)
     s = sample(form, mips)
-    fields = output_fields(s, centre)
+    fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
     for name, cf in (extra or {}).items():
         fields[name] = np.asarray(cf(mips)).reshape(len(s.X), -1).squeeze()
     # match each sampled element vertex to a mesh vertex

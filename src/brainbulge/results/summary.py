@@ -65,6 +65,7 @@ def solution_summary(
     edge_exclusion: float,
     near_singular: Callable[[np.ndarray], np.ndarray] | None = None,
     tissue: str | None = None,
+    fibres: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, object]:
     """The summary of MODEL.md section 3 / issue keys for any converged or partial solution.
 
@@ -72,11 +73,12 @@ def solution_summary(
     when given, points where ``near_singular(X)`` is true (e.g. a band around a 3D flap rim).
     ``tissue`` (a region regex) restricts the stretch and strain extremes to those regions;
     the others (an ultrasoft CSF filler) are reported with the prefix ``csf_``.
+    ``fibres(X)`` gives unit axon directions at reference points (default: radial).
     """
     form = sol.form
     q = quadrature_points(form.mesh, order=4)
     s = sample(form, q.points)
-    fields = output_fields(s, centre)
+    fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
     keep = away_from(s.X, singular_points, edge_exclusion)
     if near_singular is not None:
         keep &= ~near_singular(s.X)

@@ -7,39 +7,43 @@ After static condensation of the bubbles the tangent restricted to the free DOFs
 
 with ``A`` the (condensed) displacement stiffness, ``B`` the linearised constraint and
 ``C >= 0`` the pressure-pressure block that condensing the bubbles leaves behind (MINI's
-built-in stabilisation, of order ``h^2 / mu``). The Schur complement ``S = C + B A^-1 B^T``
-is spectrally equivalent to the pressure mass matrix weighted by ``1 / mu``, so::
+stabilisation, of order ``h^2 / mu``). ``A`` is not always positive definite: at a swollen
+state the geometric term ``p d2J`` makes it indefinite where the pressure exceeds the local
+shear modulus (seen on the 3D inclusion with a soft inclusion). The default preconditioner is
+block upper-triangular, in right-preconditioned GMRES::
 
-    A^-1 ~ one V-cycle of smoothed-aggregation AMG (pyamg) with the rigid-body modes as
-           near-nullspace, on node blocks (BSR, block size = dim)
-    S^-1 ~ diag(M_p / mu + C)^-1        (P1 mass matrices are spectrally equivalent
-                                          to their diagonal)
+    P = [[A~, B^T], [0, -S~]]
+    A^-1 ~ one V-cycle of smoothed-aggregation AMG (pyamg), rigid-body modes as the
+           near-nullspace, aggregation on node blocks, Gauss-Seidel smoothing
+    S^-1 ~ one AMG V-cycle on S~ = C + B diag(A)^-1 B^T      (schur="simple")
 
-``method="minres"`` uses the SPD block-diagonal preconditioner ``diag(A~, S~)`` in
-preconditioned MINRES; ``method="gmres"`` the block upper-triangular one
-``[[A~, B^T], [0, -S~]]`` in right-preconditioned GMRES, which needs about half the
-iterations but stores a Krylov basis (``restart`` vectors).
+The textbook ``S~ = M_p / mu`` (``schur="mass"``) is spectrally equivalent to ``S`` for one
+continuous pressure, but the pressure here is broken across material zones, and the zones
+include one-element-thick layers (CSF, cortex): with the exact ``A`` the mass-matrix Schur
+complement needed 162-194 GMRES iterations on the 21k-tet brain (61 with one continuous
+pressure), ``C + B diag(A)^-1 B^T`` 48; ``S`` against ``M_p / mu`` has eigenvalues from 0.0035
+to 6.2, the small ones in CSF and gray-matter interface modes. ``method="minres"`` (block
+diagonal ``diag(A~, S~)``) needs an SPD ``A~``: pass ``reference=reference_stiffness(form)``.
 
-The AMG hierarchy is set up once (``setup``) and reused across Newton iterations: only the
-finest level's smoother is refreshed with the new matrix; the whole hierarchy is rebuilt when
-the iteration count grows by more than ``refresh_factor`` over the count right after the last
-setup, or on request (``refresh()``). Every solve checks the true residual
+The AMG hierarchies are set up once (``setup``) and reused across Newton iterations: only the
+finest level's matrix and smoother are refreshed; everything is rebuilt when a solve takes more
+than ``refresh_factor`` times the iterations of the first solve after the last set-up, after a
+failed solve, or on request (``refresh()``). Every solve checks the true residual
 ``|rhs - K x| / |rhs|`` and raises :class:`ConvergenceError` if it is above ``rtol``.
 
 Both Krylov methods are written here rather than taken from SciPy: SciPy's ``minres`` stops
-on its preconditioned residual estimate, which can be far from the true residual when the two
-blocks have very different scales (it reported success at a true relative residual of 0.2 in
-issue 6), and its ``gmres`` is left-preconditioned (stops on the preconditioned residual).
-Here MINRES restarts from the true defect until the true residual meets the tolerance, and
-GMRES is right-preconditioned, so the residual it minimises is the true one.
+on its preconditioned residual estimate (it reported success at a true relative residual of
+0.2 in issue 6) and its ``gmres`` preconditions from the left, so it too stops on the
+preconditioned residual. Here GMRES is right-preconditioned (it minimises the true residual)
+and MINRES restarts from the true defect until the true residual meets the tolerance.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -114,12 +118,13 @@ def displacement_layout(form, free: np.ndarray | None = None) -> DisplacementLay
     comp_of = np.full(V.ndof, -1, dtype=np.int64)
     dofs = np.array([V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)) for v in range(mesh.nv)])
     if dofs.shape != (mesh.nv, dim):
-        raise InputError("the displacement space must be P1 (+ bubbles) with dim DOFs per vertex")
+        raise InputError("the Krylov solver needs the MINI element (P1 + condensed bubbles)")
     vert_of[dofs] = np.arange(mesh.nv)[:, None]
     comp_of[dofs] = np.arange(dim)[None, :]
     free_u = free[(free >= rng.start) & (free < rng.stop)] - rng.start
     if np.any(vert_of[free_u] < 0):
-        raise InputError("free displacement DOFs off the vertices: condense the bubbles first")
+        raise InputError("the Krylov solver needs the MINI element (P1 + condensed bubbles); "
+                         "use the direct solver for Taylor-Hood")
     coords = np.array([v.point for v in mesh.vertices], dtype=float)[:, :dim]
     return DisplacementLayout(coords, vert_of[free_u], comp_of[free_u])
 
@@ -314,7 +319,12 @@ class _AMG:
 
 
 class BlockKrylovSolver:
-    """MINRES / GMRES with an AMG block preconditioner for ``K x = r`` (MINI tangent).
+    """GMRES / MINRES with an AMG block preconditioner for ``K x = r`` (MINI tangent).
+
+    ``K`` may have more rows than ``is_u``: the extra trailing rows and columns are further
+    multipliers (the active contact constraints of a primal-dual active set, with a zero
+    diagonal block); their number may change from one solve to the next. Their Schur
+    complement is approximated by ``diag(B_c diag(A)^-1 B_c^T)``.
 
     Args:
         is_u: (n_free,) True at displacement DOFs among the free DOFs.
@@ -398,17 +408,27 @@ class BlockKrylovSolver:
 
     # --- set-up and reuse ----------------------------------------------------------------
     def _blocks(self, K: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+        """``A``, ``B^T`` and ``C`` over the multiplier DOFs: the pressures, then any rows of
+        ``K`` beyond ``len(is_u)`` (e.g. contact multipliers of an active set)."""
+        n0 = len(self.is_u)
+        if K.shape[0] < n0:
+            raise InputError(f"the matrix has {K.shape[0]} rows, fewer than is_u ({n0})")
+        iq = np.concatenate([self.ip, np.arange(n0, K.shape[0])])
         Kuu = K[self.iu]
         A = Kuu[:, self.iu].tocsr()
-        Bt = Kuu[:, self.ip].tocsr()
-        C = (-K[self.ip][:, self.ip]).tocsr()
+        Bt = Kuu[:, iq].tocsr()
+        C = (-K[iq][:, iq]).tocsr()
         return A, Bt, C
 
-    def _schur_simple(self, A, Bt, C) -> sp.csr_matrix:
-        """``C + B diag(A)^-1 B^T`` (SIMPLE's Schur complement)."""
+    def _d_inv(self, A: sp.csr_matrix) -> np.ndarray:
         d = np.abs(A.diagonal())
-        d_inv = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
-        S = (Bt.T @ sp.diags(d_inv) @ Bt + C).tocsr()
+        return np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
+
+    def _schur_simple(self, A, Bt, C) -> sp.csr_matrix:
+        """``C + B diag(A)^-1 B^T`` (SIMPLE's Schur complement) over the pressures."""
+        n_p = len(self.ip)
+        Bt = Bt[:, :n_p]
+        S = (Bt.T @ sp.diags(self._d_inv(A)) @ Bt + C[:n_p][:, :n_p]).tocsr()
         if self.schur_drop > 0:
             # drop weak couplings (most of the distance-2 stencil of B D^-1 B^T) and add
             # their magnitude to the diagonal: stays SPD, a cheaper V-cycle
@@ -427,7 +447,6 @@ class BlockKrylovSolver:
         """Build the AMG hierarchies (displacement block, and the Schur approximation)."""
         t0 = time.perf_counter()
         A, Bt, C = self._blocks(K)
-        self._A = A
         self._amg_u.setup(self.reference if self.reference is not None else A)
         if self.schur == "simple":
             self._amg_p.setup(self._schur_simple(A, Bt, C))
@@ -449,7 +468,6 @@ class BlockKrylovSolver:
             self.setup(K)
             return self._blocks(K)
         A, Bt, C = self._blocks(K)
-        self._A = A
         if self.reference is None:
             self._amg_u.update(A)
         if self.schur == "simple":
@@ -457,37 +475,47 @@ class BlockKrylovSolver:
         return A, Bt, C
 
     # --- preconditioner ------------------------------------------------------------------
-    def _preconditioner(self, Bt, C) -> Callable[[np.ndarray], np.ndarray]:
-        iu, ip = self.iu, self.ip
+    def _preconditioner(self, A, Bt, C) -> Callable[[np.ndarray], np.ndarray]:
+        iu = self.iu
+        n0, n_p = len(self.is_u), len(self.ip)
+        iq = np.concatenate([self.ip, np.arange(n0, n0 + Bt.shape[1] - n_p)])
         amg_u = self._amg_u
-        if self.schur != "simple":
+        # extra multipliers (rows beyond is_u): diag(B D^-1 B^T + C) of their own
+        d_inv = self._d_inv(A)
+        Bt_e = Bt[:, n_p:]
+        e_diag = (Bt_e.multiply(Bt_e)).T @ d_inv + np.maximum(C.diagonal()[n_p:], 0.0)
+        e_inv = np.divide(1.0, e_diag, out=np.zeros_like(e_diag), where=e_diag > 0)
+        if self.schur == "simple":
+            amg_p = self._amg_p
+        else:
             if self.schur == "mass":
-                s_diag = self.mass_diag + np.maximum(C.diagonal(), 0.0)
+                s_diag = self.mass_diag + np.maximum(C.diagonal()[:n_p], 0.0)
             else:
-                s_diag = self._schur_simple(self._A, Bt, C).diagonal()
+                s_diag = self._schur_simple(A, Bt, C).diagonal()
             # pressure DOFs that no element couples (empty rows of K, zero mass) stay zero
             s_inv = np.divide(1.0, s_diag, out=np.zeros_like(s_diag), where=s_diag > 0)
 
-            def schur_inv(rp: np.ndarray) -> np.ndarray:
+            def amg_p(rp: np.ndarray) -> np.ndarray:
                 return s_inv * rp
-        else:
-            schur_inv = self._amg_p
+
+        def schur_inv(rq: np.ndarray) -> np.ndarray:
+            return np.concatenate([amg_p(rq[:n_p]), e_inv * rq[n_p:]])
 
         if self.method == "minres":
 
             def apply(r: np.ndarray) -> np.ndarray:
                 z = np.empty_like(r)
                 z[iu] = amg_u(r[iu])
-                z[ip] = schur_inv(r[ip])
+                z[iq] = schur_inv(r[iq])
                 return z
 
             return apply
 
         def apply_tri(r: np.ndarray) -> np.ndarray:
             z = np.empty_like(r)
-            zp = -schur_inv(r[ip])
-            z[ip] = zp
-            z[iu] = amg_u(r[iu] - Bt @ zp)
+            zq = -schur_inv(r[iq])
+            z[iq] = zq
+            z[iu] = amg_u(r[iu] - Bt @ zq)
             return z
 
         return apply_tri
@@ -497,11 +525,12 @@ class BlockKrylovSolver:
         """``x`` with ``|r - K x| <= rtol |r|`` (true residual), else ConvergenceError."""
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
-        _, Bt, C = self._update(K)
-        x, its, res = self._krylov(K, r, rtol, self._preconditioner(Bt, C))
+        A, Bt, C = self._update(K)
+        with _single_threaded_blas():
+            x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C))
         if self._ref_iterations is None:
             self._ref_iterations = max(its, 1)
-        elif its > self.refresh_factor * self._ref_iterations and self.reference is None:
+        elif its > self.refresh_factor * self._ref_iterations:
             log.debug("Krylov iterations %d > %.2g x %d: AMG refresh", its,
                       self.refresh_factor, self._ref_iterations)
             self._refresh_requested = True
@@ -547,6 +576,22 @@ class BlockKrylovSolver:
         return x, its, res
 
 
+def _single_threaded_blas():
+    """BLAS on one thread for the Krylov loop.
+
+    Its dense work is small BLAS-2 (Gram-Schmidt on a few dozen vectors), where OpenBLAS'
+    threads cost more than they give: 16 ms against 1.2 ms single-threaded for 60 x 18k on
+    this 2-core machine under load.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        from contextlib import nullcontext
+
+        return nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def _minres(K, b: np.ndarray, M, rtol: float, maxiter: int) -> tuple[np.ndarray, int, float]:
     """Preconditioned MINRES (Elman, Silvester & Wathen, Algorithm 4.1), ``x0 = 0``.
 
@@ -573,7 +618,12 @@ def _minres(K, b: np.ndarray, M, rtol: float, maxiter: int) -> tuple[np.ndarray,
         delta = float(Az @ z)
         v_new = Az - (delta / gamma) * v - (gamma / gamma_old) * v_old
         z_new = M(v_new)
-        gamma_new = np.sqrt(max(float(v_new @ z_new), 0.0))
+        vz = float(v_new @ z_new)
+        if vz < 0:
+            raise ConvergenceError(
+                "MINRES needs a positive definite preconditioner and this one is not (an "
+                "indefinite displacement block): use method='gmres' or an SPD reference")
+        gamma_new = np.sqrt(vz)
         a0 = c * delta - c_old * s * gamma
         a1 = np.hypot(a0, gamma_new)
         a2 = s * delta + c_old * c * gamma

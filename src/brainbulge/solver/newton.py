@@ -40,7 +40,7 @@ class SolverOptions:
         tolerance: on the scaled residual (force / (mu L^(d-1)), volume / |Omega|).
         penetration_tol: contact penetration tolerance relative to the body size [-].
         max_augmentations: Uzawa updates per load step.
-        linear_solver: "pardiso" or "scipy".
+        linear_solver: "pardiso", "scipy" or "krylov" (GMRES with AMG blocks, MINI only).
         progress: show a progress bar over the load.
     """
 
@@ -101,7 +101,12 @@ class NewtonSolver:
     def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
         self.form = form
         self.opt = options or SolverOptions()
-        self.linear: LinearSolver = make_linear_solver(self.opt.linear_solver)
+        if self.opt.linear_solver == "krylov":  # block-preconditioned GMRES (MINI only)
+            from brainbulge.solver.krylov import BlockKrylovSolver
+
+            self.linear: LinearSolver = BlockKrylovSolver.from_form(form)
+        else:
+            self.linear = make_linear_solver(self.opt.linear_solver)
         fes = form.fes
         self.free = np.flatnonzero(np.array(list(fes.FreeDofs(form.condense)), dtype=bool))
         is_u = np.zeros(fes.ndof, dtype=bool)

@@ -93,10 +93,14 @@ def run_brain(
     bm = brain_mesh if brain_mesh is not None else brain_mesh_for(case)
     problem = brain_problem(bm, case)
     form = MixedForm(problem, element=case.element)
-    solver = NewtonSolver(form, SolverOptions(steps=case.steps, progress=progress))
+    solver = NewtonSolver(
+        form,
+        SolverOptions(steps=case.steps, progress=progress, linear_solver=case.linear_solver),
+    )
     sol = solver.solve()
-    summary = brain_summary(case, bm, form, solver, sol)
-    vf = vertex_fields(form, bm.envelope.centre_mm())
+    fibres = _fibres(case, bm)
+    summary = brain_summary(case, bm, form, solver, sol, fibres)
+    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
     _add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     np.savez_compressed(
@@ -121,6 +125,7 @@ def brain_summary(
     form: MixedForm,
     solver: NewtonSolver,
     sol,
+    fibres=None,
 ) -> dict[str, Any]:
     """``summary.json`` of a 3D scenario (see the module docstring)."""
     skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
@@ -138,7 +143,7 @@ def brain_summary(
         "inputs": dataclasses.asdict(case),
         **solution_summary(
             sol, solver, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
-            tissue=PARENCHYMA,
+            tissue=PARENCHYMA, fibres=fibres,
         ),
     }
     # the issue's name for the CSF strain (None when the mesh has no CSF)
@@ -173,6 +178,15 @@ def brain_summary(
     out["mean_pressure_mmhg"] = _mean_parenchyma_pressure(form) * KPA_TO_MMHG
     out["max_penetration_mm"] = out["max_penetration"]
     return out
+
+
+def _fibres(case: CraniectomyCase, bm: BrainMesh):
+    """Axon directions of ``case.fibres`` (None: radial from the brain's centre)."""
+    if case.fibres is None:
+        return None
+    from brainbulge.geometry.brain.fibres import FibreField
+
+    return FibreField(case.fibres, bm.envelope.centre_mm())
 
 
 def _vertex_displacements(form: MixedForm, bm: BrainMesh) -> np.ndarray:

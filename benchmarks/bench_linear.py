@@ -1,0 +1,260 @@
+"""Linear-solver benchmark: the MINI tangent of the brain, direct (PARDISO) against Krylov.
+
+For each mesh size: build (or load from ``--cache``) the ICBM152 brain mesh, set up the
+white-matter swelling problem (``Js = 1.1`` in both hemispheres, left flap open), solve the
+load step ``--load`` by Newton's method (with the Krylov solver), then take the tangent at
+that state with the right-hand side of the next load step (``--load + 0.25``) as system 1 and
+the tangent after one Newton step on it as system 2. Each solver runs in a fresh process (so
+its peak memory is its own) on system 1 (set-up + solve) and on system 2 (the Krylov solvers
+reuse their AMG set-up). Prints one table row per solver.
+
+The skull is clamped (``base|skull``), a stand-in for the contact with the rigid skull.
+
+    python benchmarks/bench_linear.py --tets 30000 100000
+    python benchmarks/bench_linear.py --tets 30000 --variants gmres-simple --rtols 1e-2 1e-4
+
+Columns: setup_s (AMG set-up, PARDISO factorisation counted in solve), solve_s (system 1),
+its (Krylov iterations), res (true relative residual), err (relative difference from the
+PARDISO solution), reuse_s / reuse_its (system 2, hierarchy reused), peak_mb (process peak
+RSS) and extra_mb (the solver's own: peak RSS during the solves minus the RSS before them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+VARIANTS = {
+    "gmres-simple": {"method": "gmres", "schur": "simple"},
+    "gmres-mass": {"method": "gmres", "schur": "mass"},
+    "gmres-mass-unweighted": {"method": "gmres", "schur": "mass", "_mass": "unweighted"},
+    "minres-simple-ref": {"method": "minres", "schur": "simple", "_reference": True},
+    "minres-mass-ref": {"method": "minres", "schur": "mass", "_reference": True},
+}
+
+
+# --- building the systems (main process) ---------------------------------------------
+def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
+    """Assemble and save the two systems; returns mesh/DOF facts and timings."""
+    import scipy.sparse as sp
+
+    from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
+    from brainbulge.model.brain import CraniectomyCase, brain_problem
+    from brainbulge.model.problem import Problem
+    from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+    from brainbulge.solver.krylov import (
+        BlockKrylovSolver,
+        displacement_layout,
+        pressure_schur_mass,
+        reference_stiffness,
+    )
+
+    info: dict = {}
+    path = cache / f"brain_{tets}" / "brain.npz"
+    t0 = time.perf_counter()
+    if path.exists():
+        bm = load_brain_mesh(path)
+    else:
+        bm = build_brain_mesh(target_tets=tets)
+        save_brain_mesh(bm, path.parent, flap="left", figures=False)
+    info["mesh_s"] = time.perf_counter() - t0
+    full = brain_problem(bm, CraniectomyCase(flap="left", swell="both", swelling=1.1))
+    problem = Problem(full.mesh, full.materials, full.swelling, clamped="base|skull")
+    form = MixedForm(problem, element="mini", compile_energy=True)
+    ns = NewtonSolver(form, SolverOptions(tolerance=1e-8))
+    ns.linear = BlockKrylovSolver.from_form(form, rtol=1e-6, maxiter=2000)
+    x = form.gfu.vec
+    t0 = time.perf_counter()
+    steps = max(1, round(load / 0.25))
+    for k in range(1, steps + 1):
+        form.set_load(load * k / steps)
+        ok, _, _ = ns.newton(x)
+        if not ok:
+            raise RuntimeError(f"Newton failed at load {load * k / steps}")
+    info["state_s"] = time.perf_counter() - t0
+    info["tets"] = form.mesh.ne
+    form.set_load(min(load + 0.25, 1.0))
+
+    def system():
+        ns.residual(x)
+        K = ns.tangent(x)
+        rhs = x.CreateVector()
+        rhs.data = ns.res
+        rhs.data += form.a.harmonic_extension_trans * rhs
+        return K, rhs
+
+    t0 = time.perf_counter()
+    K1, rhs1 = system()
+    info["assembly_s"] = time.perf_counter() - t0
+    dx = ns.newton_direction(x)  # one Newton step: the next tangent
+    if isinstance(dx, tuple):  # (dx, contact multiplier steps)
+        dx = dx[0]
+    x.data -= dx
+    K2, rhs2 = system()
+    free = ns.free
+    lay = displacement_layout(form, free)
+    mass_w = pressure_schur_mass(form, free)
+    mass_u = pressure_schur_mass(form, free, weighted=False)
+    ref = reference_stiffness(form, free)
+    arrays = {"is_u": ns.is_u_free, "coords": lay.coords, "vertex": lay.vertex,
+              "component": lay.component}
+    for name, K, rhs in (("1", K1, rhs1), ("2", K2, rhs2)):
+        arrays[f"rhs{name}"] = rhs.FV().NumPy()[free]
+        sp.save_npz(out / f"K{name}.npz", K)
+    np.savez(out / "system.npz", **arrays)
+    sp.save_npz(out / "mass_weighted.npz", mass_w)
+    sp.save_npz(out / "mass_unweighted.npz", mass_u)
+    sp.save_npz(out / "reference.npz", ref)
+    info["dofs"] = int(K1.shape[0])
+    info["dofs_u"] = int(ns.is_u_free.sum())
+    info["nnz"] = int(K1.nnz)
+    return info
+
+
+# --- one solver in a fresh process ----------------------------------------------------
+def _rss_mb() -> float:
+    """Peak resident memory of this process [MB]."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _status_mb(key: str) -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(key + ":"):
+                return float(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _reset_peak() -> float:
+    """Reset the peak-RSS counter (Linux: ``clear_refs`` 5) and return the current RSS."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        pass
+    return _status_mb("VmRSS")
+
+
+def worker(folder: Path, variant: str, rtol: float) -> dict:
+    import scipy.sparse as sp
+
+    from brainbulge.solver.krylov import BlockKrylovSolver, DisplacementLayout
+    from brainbulge.solver.linear import PardisoSolver
+
+    d = np.load(folder / "system.npz")
+    systems = [(sp.load_npz(folder / f"K{n}.npz").tocsr(), d[f"rhs{n}"]) for n in "12"]
+    base = _reset_peak()
+    row: dict = {"variant": variant, "rtol": rtol}
+    if variant == "pardiso":
+        solver = PardisoSolver()
+        t0 = time.perf_counter()
+        x = solver.solve(*systems[0])
+        row.update(setup_s=0.0, solve_s=time.perf_counter() - t0, its=0)
+        t0 = time.perf_counter()
+        solver.solve(*systems[1])
+        row.update(reuse_s=time.perf_counter() - t0, reuse_its=0)
+        np.save(folder / "x_pardiso.npy", x)
+    else:
+        opts = dict(VARIANTS[variant])
+        mass = sp.load_npz(folder / f"mass_{opts.pop('_mass', 'weighted')}.npz")
+        if opts.pop("_reference", False):
+            opts["reference"] = sp.load_npz(folder / "reference.npz").tocsr()
+        lay = DisplacementLayout(d["coords"], d["vertex"], d["component"])
+        solver = BlockKrylovSolver(d["is_u"], lay, mass, rtol=rtol, maxiter=3000, **opts)
+        K, r = systems[0]
+        t0 = time.perf_counter()
+        solver.setup(K)
+        row["setup_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        x = solver.solve(K, r)
+        row.update(solve_s=time.perf_counter() - t0, its=solver.stats.iterations[-1])
+        t0 = time.perf_counter()
+        solver.solve(*systems[1])
+        row.update(reuse_s=time.perf_counter() - t0, reuse_its=solver.stats.iterations[-1],
+                   setups=solver.stats.setups)
+    K, r = systems[0]
+    row["res"] = float(np.linalg.norm(r - K @ x) / np.linalg.norm(r))
+    ref_path = folder / "x_pardiso.npy"
+    if ref_path.exists():
+        xd = np.load(ref_path)
+        row["err"] = float(np.linalg.norm(x - xd) / np.linalg.norm(xd))
+    row["peak_mb"] = _rss_mb()
+    row["extra_mb"] = _status_mb("VmHWM") - base
+    return row
+
+
+def run_worker(folder: Path, variant: str, rtol: float) -> dict:
+    cmd = [sys.executable, __file__, "--worker", str(folder), variant, str(rtol)]
+    out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    lines = [ln for ln in out.stdout.splitlines() if ln.startswith("{")]
+    if out.returncode != 0 or not lines:
+        tail = (out.stderr.strip().splitlines() or ["?"])[-1]
+        return {"variant": variant, "rtol": rtol, "failed": tail}
+    return json.loads(lines[-1])
+
+
+COLS = ("variant", "rtol", "setup_s", "solve_s", "its", "res", "err", "reuse_s", "reuse_its",
+        "peak_mb", "extra_mb")
+
+
+def fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.3g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.1e}"
+    return str(v)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--tets", type=int, nargs="+", default=[30_000, 100_000],
+                    help="target tetrahedra of the brain meshes")
+    ap.add_argument("--cache", type=Path, default=Path.home() / ".cache/brainbulge/bench",
+                    help="where brain meshes are kept between runs")
+    ap.add_argument("--load", type=float, default=0.5, help="load factor of the state")
+    ap.add_argument("--rtol", type=float, default=1e-8)
+    ap.add_argument("--rtols", type=float, nargs="*", default=[],
+                    help="extra tolerances for the first Krylov variant (inexact Newton)")
+    ap.add_argument("--variants", nargs="+", default=["gmres-simple", "gmres-mass",
+                                                      "gmres-mass-unweighted",
+                                                      "minres-simple-ref"],
+                    choices=list(VARIANTS))
+    ap.add_argument("--no-pardiso", action="store_true")
+    ap.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        folder, variant, rtol = args.worker
+        print(json.dumps(worker(Path(folder), variant, float(rtol))), flush=True)
+        return
+    args.cache.mkdir(parents=True, exist_ok=True)
+    print(f"cores: {os.cpu_count()} (timings are noisy on a shared machine)")
+    for tets in args.tets:
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp)
+            info = brain_system(tets, args.cache, args.load, folder)
+            print(f"\nbrain, target {tets} tets: {info['tets']} tets, {info['dofs']} free DOFs "
+                  f"({info['dofs_u']} displacement), nnz {info['nnz']}, assembly "
+                  f"{info['assembly_s']:.1f} s, state (Newton to load {args.load}) "
+                  f"{info['state_s']:.0f} s", flush=True)
+            print(" | ".join(COLS), flush=True)
+            jobs = [] if args.no_pardiso else [("pardiso", args.rtol)]
+            jobs += [(v, args.rtol) for v in args.variants]
+            jobs += [(args.variants[0], t) for t in args.rtols]
+            for variant, rtol in jobs:
+                row = run_worker(folder, variant, rtol)
+                if "failed" in row:
+                    print(f"{variant} | {rtol:g} | failed: {row['failed']}", flush=True)
+                    continue
+                print(" | ".join(fmt(row.get(c, "")) for c in COLS), flush=True)
+
+
+if __name__ == "__main__":
+    main()

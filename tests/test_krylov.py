@@ -1,0 +1,193 @@
+"""The block-preconditioned Krylov solver against the direct one on a small 3D MINI problem.
+
+A soft swelling inclusion (CSF-like, mu 10x smaller) in a stiff matrix, at a swollen state
+reached by Newton's method: the displacement block of that tangent is indefinite there.
+"""
+
+from __future__ import annotations
+
+import ngsolve as ngs
+import numpy as np
+import pytest
+
+from brainbulge.errors import ConvergenceError
+from brainbulge.geometry.inclusion import inclusion_mesh
+from brainbulge.materials import MooneyRivlin
+from brainbulge.model import Problem
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.krylov import (
+    BlockKrylovSolver,
+    displacement_layout,
+    free_dofs,
+    pressure_schur_mass,
+    reference_stiffness,
+)
+from brainbulge.solver.linear import PardisoSolver
+
+SOFT = MooneyRivlin(0.03, 33.3)
+STIFF = MooneyRivlin(0.28, 333.0)
+# several AMG levels even on this small mesh
+AMG = {"max_coarse": 30}
+
+
+@pytest.fixture(scope="module")
+def swollen():
+    """Form, Newton solver and the tangent/right-hand side of a Newton step at a swollen
+    state (load 0.7 of Js = 1.3 converged, then the load raised to 1)."""
+    mesh = inclusion_mesh(3, A=0.3, h=0.3, h_inclusion=0.15)
+    problem = Problem(
+        mesh,
+        {"inclusion": SOFT, "matrix": STIFF},
+        {"inclusion": 1.3},
+        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
+    )
+    form = MixedForm(problem, element="mini")
+    ns = NewtonSolver(form, SolverOptions(tolerance=1e-10))
+    for load in (0.4, 0.7):
+        form.set_load(load)
+        ok, _, _ = ns.newton(form.gfu.vec)
+        assert ok
+    x = form.gfu.vec
+    K1 = ns.tangent(x)
+    form.set_load(1.0)
+    r = ns.residual(x)
+    rhs = x.CreateVector()
+    rhs.FV().NumPy()[:] = r
+    rhs.data += form.a.harmonic_extension_trans * rhs
+    return form, ns, K1, rhs.FV().NumPy()[ns.free].copy()
+
+
+def _direct(K, r):
+    return PardisoSolver().solve(K, r)
+
+
+def test_layout_matches_ngsolve_ordering(swollen) -> None:
+    """VectorH1 (order 1 + bubbles) numbers x of all vertices and bubbles, then y, then z."""
+    form, ns, _, _ = swollen
+    lay = displacement_layout(form)
+    V = form.fes.components[0]
+    per_comp = V.ndof // 3
+    free_u = ns.free[ns.is_u_free]
+    np.testing.assert_array_equal(lay.component, free_u // per_comp)
+    np.testing.assert_array_equal(lay.vertex, free_u % per_comp)
+    assert per_comp == form.mesh.nv + form.mesh.ne  # one bubble per tet and component
+
+
+def test_rigid_modes_in_the_kernel_of_the_reference_stiffness(box3d) -> None:
+    # straight-sided tets (the inclusion mesh is curved: P1 there is not linear in x)
+    problem = Problem(box3d, {"tissue": STIFF}, {"tissue": 1.1})
+    form = MixedForm(problem, element="mini")  # no boundary condition: all DOFs free
+    A = reference_stiffness(form)
+    modes = displacement_layout(form).rigid_body_modes()
+    assert modes.shape[1] == 6
+    for m in modes.T:
+        assert np.linalg.norm(A @ m) <= 1e-10 * abs(A).max() * np.linalg.norm(m)
+
+
+def test_pressure_mass_is_weighted_by_one_over_mu(swollen) -> None:
+    form = swollen[0]
+    M = pressure_schur_mass(form)
+    vol = {r: ngs.Integrate(1, form.mesh, definedon=form.mesh.Materials(r))
+           for r in ("inclusion", "matrix")}
+    expected = vol["inclusion"] / SOFT.shear_modulus + vol["matrix"] / STIFF.shear_modulus
+    assert M.sum() == pytest.approx(expected, rel=1e-5)  # quadrature on curved tets
+
+
+@pytest.mark.parametrize("method,schur", [("gmres", "simple"), ("gmres", "mass"),
+                                          ("minres", "simple")])
+def test_matches_direct_solve(swollen, method: str, schur: str) -> None:
+    form, ns, K, r = swollen
+    options = {"method": method, "schur": schur, "rtol": 1e-10, "amg": AMG}
+    if method == "minres":  # needs an SPD displacement preconditioner
+        options["reference"] = reference_stiffness(form)
+    solver = BlockKrylovSolver.from_form(form, **options)
+    x = solver.solve(K, r)
+    x_direct = _direct(K, r)
+    assert np.linalg.norm(x - x_direct) <= 1e-6 * np.linalg.norm(x_direct)
+    assert solver.stats.residuals[-1] <= 1e-10
+    assert len(solver._amg_u.ml.levels) >= 2
+
+
+def test_minres_refuses_an_indefinite_preconditioner(swollen) -> None:
+    """The displacement block of this tangent is indefinite: AMG on it is no SPD
+    preconditioner, and MINRES says so instead of returning a wrong answer."""
+    form, ns, K, r = swollen
+    A = K[ns.is_u_free][:, ns.is_u_free].toarray()
+    assert np.linalg.eigvalsh(A)[0] < 0
+    solver = BlockKrylovSolver.from_form(form, method="minres", rtol=1e-10,
+                                         amg={"max_coarse": 10_000})  # exact A^-1
+    with pytest.raises(ConvergenceError, match="positive definite"):
+        solver.solve(K, r)
+
+
+def test_true_residual_check_raises_when_the_budget_is_too_small(swollen) -> None:
+    form, _, K, r = swollen
+    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, maxiter=3, amg=AMG)
+    with pytest.raises(ConvergenceError, match="relative residual"):
+        solver.solve(K, r)
+    # a failed solve rebuilds the hierarchy next time; a looser tolerance is met
+    solver.maxiter = 500
+    x = solver.solve(K, r, rtol=1e-4)
+    assert np.linalg.norm(r - K @ x) <= 1e-4 * np.linalg.norm(r)
+    assert solver.stats.setups == 2
+
+
+def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
+    form, ns, K1, r1 = swollen
+    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
+    x1 = solver.solve(K1, r1)
+    r2 = np.random.default_rng(0).standard_normal(len(r1)) * np.abs(r1).max()
+    x2 = solver.solve(K1, r2)
+    # the tangent one Newton step later: a changed matrix, same hierarchy
+    x = form.gfu.vec
+    saved = x.FV().NumPy().copy()
+    dx = x.CreateVector()
+    dx.FV().NumPy()[:] = 0
+    dx.FV().NumPy()[ns.free] = x1
+    dx.data += form.a.harmonic_extension * dx
+    x.data -= dx
+    K2 = ns.tangent(x)
+    x.FV().NumPy()[:] = saved
+    assert abs(K2 - K1).max() > 1e-3 * abs(K1).max()
+    x3 = solver.solve(K2, r1)
+    assert solver.stats.setups == 1
+    for K, r, sol in ((K1, r2, x2), (K2, r1, x3)):
+        ref = _direct(K, r)
+        assert np.linalg.norm(sol - ref) <= 1e-6 * np.linalg.norm(ref)
+    # iterations far above those right after the set-up trigger a rebuild, as does refresh()
+    solver.refresh_factor = 0.1
+    solver.solve(K2, r1)
+    solver.solve(K2, r1)
+    assert solver.stats.setups == 2
+    solver.refresh()
+    solver.solve(K2, r1)
+    assert solver.stats.setups == 3
+
+
+def test_zero_right_hand_side(swollen) -> None:
+    form, _, K, r = swollen
+    solver = BlockKrylovSolver.from_form(form, amg=AMG)
+    assert not np.any(solver.solve(K, np.zeros_like(r)))
+    assert free_dofs(form).size == K.shape[0]
+
+
+def test_extra_constraint_rows_of_an_active_set(swollen) -> None:
+    """``[[K, -G^T], [-G, 0]]`` with constraint rows ``G`` on a few displacement DOFs (as the
+    contact multipliers of the active set), a different number at each solve."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    form, ns, K, r = swollen
+    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
+    iu = np.flatnonzero(ns.is_u_free)
+    rng = np.random.default_rng(1)
+    for n_c in (5, 12):
+        cols = rng.choice(iu, n_c, replace=False)
+        G = sp.csr_matrix((rng.uniform(0.5, 1.0, n_c), (np.arange(n_c), cols)),
+                          shape=(n_c, K.shape[0]))
+        K_aug = sp.bmat([[K, -G.T], [-G, None]], format="csr")
+        r_aug = np.concatenate([r, 1e-3 * rng.standard_normal(n_c)])
+        x = solver.solve(K_aug, r_aug)
+        ref = spla.spsolve(K_aug.tocsc(), r_aug)  # pypardiso rejects the empty diagonal
+        assert np.linalg.norm(x - ref) <= 1e-6 * np.linalg.norm(ref)
+    assert solver.stats.setups == 1
