@@ -202,3 +202,19 @@ def test_fibres_change_lambda_n(symmetric_brain, shifts, tmp_path) -> None:
     assert s["max_radial_stretch"] != pytest.approx(shifts["left"]["max_radial_stretch"])
     assert s["midline_shift_mm"] == pytest.approx(shifts["left"]["midline_shift_mm"])
     assert np.all(d["point_lambda_n"] > 0)
+
+
+def test_study_resume_refuses_a_mesh_built_for_other_options(tmp_path) -> None:
+    from brainbulge.errors import InputError
+    from brainbulge.studies.craniectomy import prepare_study_mesh
+
+    mesh_dir = tmp_path / "mesh"
+    mesh_dir.mkdir()
+    (mesh_dir / "brain.npz").write_bytes(b"")
+    common = {"tets": 30000, "flap": "left", "swell": "both"}
+    spec = {k: None for k in ("labels", "label_map", "brain_volume_ml", "flap_centre_mm",
+                              "flap_diameter_mm")}
+    (mesh_dir / "spec.json").write_text(json.dumps({"tets": 30000, **spec}))
+    assert prepare_study_mesh(tmp_path, common) == mesh_dir / "brain.npz"
+    with pytest.raises(InputError, match="same mesh options"):
+        prepare_study_mesh(tmp_path, {**common, "tets": 100000})

@@ -24,6 +24,7 @@ stress is singular; ``raw_*`` over all parenchyma, ``csf_*`` over the CSF filler
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -281,9 +282,21 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any]) -> Path:
     path = Path(out_dir) / "mesh" / "brain.npz"
     if common.get("mesh"):
         return Path(common["mesh"])
-    if not path.is_file():
-        case = case_from_dict({k: v for k, v in common.items() if k != "mesh"})
-        save_brain_mesh(brain_mesh_for(case), path.parent)
+    keys = ("tets", "labels", "label_map", "brain_volume_ml", "flap_centre_mm",
+            "flap_diameter_mm")
+    spec = {k: common.get(k) for k in keys}
+    spec = json.loads(json.dumps(spec))  # tuples -> lists, as read back
+    spec_path = path.parent / "spec.json"
+    if path.is_file():
+        if spec_path.is_file() and json.loads(spec_path.read_text()) != spec:
+            raise InputError(
+                f"the study's mesh {path} was built for {spec_path.read_text().strip()}; "
+                "resume with the same mesh options or pass --overwrite"
+            )
+        return path
+    case = case_from_dict({k: v for k, v in common.items() if k != "mesh"})
+    save_brain_mesh(brain_mesh_for(case), path.parent)
+    spec_path.write_text(json.dumps(spec))
     return path
 
 
