@@ -102,10 +102,11 @@ def test_point_contact_derivatives(element: str, obstacle) -> None:
     assert np.linalg.norm(dg - B @ dx) < 1e-6 * np.linalg.norm(dg)
 
 
-@pytest.fixture(scope="module")
-def capped_sphere():
-    mesh = inclusion_mesh(3, A=A, h=0.15, h_inclusion=A / 3)
-    skull = SphericalSkull(R=1.0, cap_deg=35, thickness=0.2, edge_radius=0.05, both_poles=True)
+def _capped_ball(h: float, h_inclusion: float, cap_deg: float):
+    """Ball octant with a swelling inclusion, sliding in a spherical skull with polar caps."""
+    mesh = inclusion_mesh(3, A=A, h=h, h_inclusion=h_inclusion)
+    skull = SphericalSkull(R=1.0, cap_deg=cap_deg, thickness=0.2, edge_radius=0.05,
+                           both_poles=True)
     problem = Problem(
         mesh,
         {"inclusion": GRAY, "matrix": GRAY},
@@ -113,6 +114,12 @@ def capped_sphere():
         clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
         contacts=[Contact("outer", skull)],
     )
+    return mesh, problem
+
+
+@pytest.fixture(scope="module")
+def capped_sphere():
+    mesh, problem = _capped_ball(h=0.15, h_inclusion=A / 3, cap_deg=35)
     form = MixedForm(problem, element="mini")
     solver = NewtonSolver(form, SolverOptions(steps=2))
     sol = solver.solve()
@@ -159,14 +166,6 @@ def test_capped_sphere_contact(capped_sphere) -> None:
 
 
 def test_closed_skull_is_infeasible() -> None:
-    mesh = inclusion_mesh(3, A=A, h=0.3, h_inclusion=A / 2)
-    skull = SphericalSkull(R=1.0, cap_deg=0.0, thickness=0.2, edge_radius=0.05)
-    problem = Problem(
-        mesh,
-        {"inclusion": GRAY, "matrix": GRAY},
-        {"inclusion": JS},
-        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
-        contacts=[Contact("outer", skull)],
-    )
+    _, problem = _capped_ball(h=0.3, h_inclusion=A / 2, cap_deg=0.0)
     with pytest.raises(InfeasibleError, match="closed domain"):
         NewtonSolver(MixedForm(problem, element="mini")).solve()

@@ -8,10 +8,11 @@ component (symmetry planes), in frictionless contact with a rigid obstacle, or t
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol, TypeVar
 
 import ngsolve as ngs
 
@@ -112,3 +113,23 @@ def outer_boundary_names(mesh: ngs.Mesh) -> list[str]:
         if len(mesh[facet].elements) == 1:
             found.add(name)
     return sorted(found)
+
+
+Case = TypeVar("Case")
+
+
+def case_from_config(cls: type[Case], config: dict[str, Any], what: str) -> Case:
+    """A case dataclass ``cls`` from a plain dict (TOML table, CLI, study scenario), with a
+    one-line error naming unknown or ill-typed ``what`` options."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(config) - names
+    if unknown:
+        raise InputError(
+            f"unknown {what} option(s) {', '.join(sorted(unknown))}; "
+            f"valid: {', '.join(sorted(names))}"
+        )
+    try:
+        return cls(**config)
+    except TypeError as err:
+        raise InputError(f"invalid {what} options: {err}") from None
+

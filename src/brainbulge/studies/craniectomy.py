@@ -39,6 +39,7 @@ from brainbulge.model.brain import (
     brain_problem,
     white_matter_volume_ml,
 )
+from brainbulge.model.problem import case_from_config
 from brainbulge.results.brain_metrics import (
     brain_volume_ml,
     bulge_volume_ml,
@@ -68,17 +69,7 @@ SCENARIOS = [
 
 def case_from_dict(config: dict[str, Any]) -> CraniectomyCase:
     """A :class:`CraniectomyCase` from a plain dict (TOML table, CLI, study scenario)."""
-    names = {f.name for f in dataclasses.fields(CraniectomyCase)}
-    unknown = set(config) - names
-    if unknown:
-        raise InputError(
-            f"unknown brain option(s) {', '.join(sorted(unknown))}; "
-            f"valid: {', '.join(sorted(names))}"
-        )
-    try:
-        return CraniectomyCase(**config)
-    except TypeError as err:
-        raise InputError(f"invalid brain options: {err}") from None
+    return case_from_config(CraniectomyCase, config, "brain")
 
 
 def run_brain(

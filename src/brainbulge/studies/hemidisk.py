@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.errors import ConvergenceError
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+from brainbulge.model.problem import case_from_config
 from brainbulge.results.export import VertexFields, vertex_fields, write_vtu
 from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
 from brainbulge.results.run_record import atomic_write_json
@@ -43,17 +44,7 @@ DISK_POSITIONS = (
 
 def case_from_dict(config: dict[str, Any]) -> HemidiskCase:
     """A :class:`HemidiskCase` from a plain dict (TOML table, CLI, study scenario)."""
-    names = {f.name for f in dataclasses.fields(HemidiskCase)}
-    unknown = set(config) - names
-    if unknown:
-        raise InputError(
-            f"unknown hemidisk option(s) {', '.join(sorted(unknown))}; "
-            f"valid: {', '.join(sorted(names))}"
-        )
-    try:
-        return HemidiskCase(**config)
-    except TypeError as err:  # pragma: no cover - wrong types in TOML
-        raise InputError(f"invalid hemidisk options: {err}") from None
+    return case_from_config(HemidiskCase, config, "hemidisk")
 
 
 def run_hemidisk(
