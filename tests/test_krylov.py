@@ -191,3 +191,37 @@ def test_extra_constraint_rows_of_an_active_set(swollen) -> None:
         ref = spla.spsolve(K_aug.tocsc(), r_aug)  # pypardiso rejects the empty diagonal
         assert np.linalg.norm(x - ref) <= 1e-6 * np.linalg.norm(ref)
     assert solver.stats.setups == 1
+
+
+def test_forcing_terms_follow_the_residual_ratio() -> None:
+    """Eisenstat-Walker choice 2: tight when Newton converges fast, capped, safeguarded,
+    and never tighter than the Newton tolerance needs."""
+    from brainbulge.solver.newton import ETA_MAX, ETA_MIN, forcing_term
+
+    assert forcing_term(ETA_MAX, 0.9, 1.0, 1e-9) == ETA_MAX  # slow progress: loose
+    assert forcing_term(ETA_MAX, 1e-3, 1e-3, 1e-12) == pytest.approx(0.9e-6)
+    assert forcing_term(ETA_MAX, 1e-3, 1e-8, 1e-9) == pytest.approx(min(1e-2, ETA_MAX))
+    assert forcing_term(0.5, 1e-6, 1.0, 1e-20) == pytest.approx(min(0.9 * 0.25, ETA_MAX))
+    assert forcing_term(ETA_MAX, 0.0, 1e-30, 0.0) == ETA_MIN
+
+
+def test_inexact_newton_reaches_the_direct_solution() -> None:
+    """Newton with Krylov at Eisenstat-Walker tolerances converges to the same state as
+    Newton with the direct solver, in about as many iterations."""
+    mesh = inclusion_mesh(3, A=0.3, h=0.3, h_inclusion=0.15)
+    problem = Problem(
+        mesh,
+        {"inclusion": SOFT, "matrix": STIFF},
+        {"inclusion": 1.3},
+        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
+    )
+    sols = {}
+    for linear in ("pardiso", "krylov"):
+        form = MixedForm(problem, element="mini")
+        sol = NewtonSolver(form, SolverOptions(steps=2, linear_solver=linear)).solve()
+        assert sol.converged
+        sols[linear] = (form.gfu.vec.FV().NumPy().copy(), sol.newton_iterations)
+    (x_d, it_d), (x_k, it_k) = sols["pardiso"], sols["krylov"]
+    free = np.abs(x_d) > 0
+    assert np.max(np.abs(x_k - x_d)) <= 1e-6 * np.max(np.abs(x_d[free]))
+    assert it_k <= it_d + 3

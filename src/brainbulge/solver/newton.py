@@ -135,6 +135,9 @@ class NewtonSolver:
         self._compl: list[np.ndarray] = []
         self._forced: list[np.ndarray] = [np.zeros(pc.n_points, bool) for pc in form.point_contacts]
         self._last_active: list[np.ndarray] = []
+        # inexact Newton (Eisenstat-Walker): relative tolerance of an iterative linear solve
+        self.inexact = self.opt.linear_solver == "krylov"
+        self.eta = ETA_MAX
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
@@ -220,7 +223,10 @@ class NewtonSolver:
             )
             b = np.concatenate([b, *rhs_B])
         t0 = time.perf_counter()
-        sol = self.linear.solve(K, b)
+        if self.inexact:
+            sol = self.linear.solve(K, b, rtol=self.eta)
+        else:
+            sol = self.linear.solve(K, b)
         self.t_solve += time.perf_counter() - t0
         dx = x.CreateVector()
         dx[:] = 0
@@ -242,6 +248,7 @@ class NewtonSolver:
         # Newton step pushed into the skull (left alone, such a weakly active point makes
         # the active set cycle and the line search halve every step)
         self._forced = [np.zeros(pc.n_points, dtype=bool) for pc in pcs]
+        self.eta = ETA_MAX
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
         for it in range(self.opt.max_iterations + 1):
@@ -258,7 +265,15 @@ class NewtonSolver:
                 try:
                     dx, dlams = self.newton_direction(x)
                 except ConvergenceError:
-                    return False, it, norm
+                    if not self.inexact or self.eta <= ETA_MIN:
+                        return False, it, norm
+                    # a failed Krylov solve has asked for a fresh AMG: retry it, tighter
+                    log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
+                    self.eta = ETA_MIN
+                    try:
+                        dx, dlams = self.newton_direction(x)
+                    except ConvergenceError:
+                        return False, it, norm
                 s = 1.0
                 while True:
                     x.data = x0 - s * dx
@@ -277,6 +292,7 @@ class NewtonSolver:
                             pc.lam = l0
                         return False, it, norm
                 if s > 0:
+                    self.eta = forcing_term(self.eta, trial / norm, trial, self.opt.tolerance)
                     norm = trial
                     break
                 x.data = x0
@@ -476,6 +492,24 @@ def _coo_sum(
     return sp.coo_matrix(
         (np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=shape
     ).tocsr()
+
+
+ETA_MAX = 1e-4  # loosest relative tolerance of an inexact Newton solve
+ETA_MIN = 1e-10  # tightest
+
+
+def forcing_term(eta: float, ratio: float, norm: float, tolerance: float) -> float:
+    """Relative tolerance of the next inexact linear solve (Eisenstat & Walker 1996, choice 2).
+
+    ``eta_k = 0.9 (|R_k| / |R_k-1|)^2``, kept above ``0.9 eta_k-1^2`` while that is above
+    0.1 (no sudden over-solving), capped at :data:`ETA_MAX`, and not below ``0.1 tol/|R_k|``:
+    a linear residual below what the Newton tolerance needs buys nothing.
+    """
+    eta_new = 0.9 * ratio**2
+    if 0.9 * eta**2 > 0.1:
+        eta_new = max(eta_new, 0.9 * eta**2)
+    eta_new = max(eta_new, 0.1 * tolerance / max(norm, 1e-300))
+    return float(min(max(eta_new, ETA_MIN), ETA_MAX))
 
 
 def solve(
