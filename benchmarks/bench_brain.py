@@ -3,8 +3,9 @@
 Run ``python benchmarks/bench_brain.py [--sizes 30000 100000 400000] [--steps 2]``. Each size
 runs in a fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from
 ``--cache DIR``), then solved with MINI elements and exact contact multipliers. The table
-gives tets, DOFs, mesh time, solve time (assembly / linear solve), Newton iterations, peak
-resident memory, the midline shift and the bulge volume.
+gives tets, DOFs, mesh time, solve time (assembly / linear solve), the whole run with its
+outputs, Newton and Krylov iterations, peak resident memory, the midline shift, the bulge
+volume and the penetration. Each run logs its Newton residuals to ``CACHE/run_N_SOLVER.log``.
 """
 
 from __future__ import annotations
@@ -19,9 +20,17 @@ from pathlib import Path
 
 
 def one(target_tets: int, steps: int, cache: Path, linear: str = "pardiso") -> dict:
+    import logging
+
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
     from brainbulge.studies.craniectomy import run_brain
 
+    cache.mkdir(parents=True, exist_ok=True)
+    logging.basicConfig(  # per-iteration residuals and Krylov counts, for a slow run
+        level=logging.DEBUG, filename=cache / f"run_{target_tets}_{linear}.log", filemode="w",
+        format="%(asctime)s %(name)s %(message)s")
+    for noisy in ("matplotlib", "PIL"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
     t0 = time.perf_counter()
     path = cache / f"brain_{target_tets}" / "brain.npz"
     if path.is_file():
@@ -31,12 +40,15 @@ def one(target_tets: int, steps: int, cache: Path, linear: str = "pardiso") -> d
         save_brain_mesh(bm, path.parent, figures=False)
     t_mesh = time.perf_counter() - t0
     out = cache / f"run_{target_tets}_{linear}"
+    t1 = time.perf_counter()
     s = run_brain({"flap": "left", "swell": "both", "steps": steps, "linear_solver": linear},
                   out, brain_mesh=bm)
+    t_run = time.perf_counter() - t1
     return {
         "tets": s["elements"], "dofs": s["dofs"], "mesh_s": t_mesh, "solve_s": s["wall_time_s"],
         "assembly_s": s["assembly_time_s"], "linear_s": s["linear_solve_time_s"],
         "newton": s["newton_iterations"], "steps": s["load_steps"],
+        "linear_its": s["linear_iterations"], "run_s": t_run, "converged": s["converged"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "shift_mm": s["midline_shift_mm"], "bulge_ml": s["bulge_volume_ml"],
         "penetration_mm": s["max_penetration_mm"], "linear": linear,
@@ -58,7 +70,8 @@ def main() -> int:
         return 0
     print(f"{'target':>8} {'linear':>8} {'tets':>8} {'dofs':>8} {'mesh s':>7} {'solve s':>8} "
           f"{'asm s':>7} "
-          f"{'lin s':>7} {'newton':>6} {'peak MB':>8} {'shift mm':>8} {'bulge ml':>8} "
+          f"{'lin s':>7} {'run s':>7} {'newton':>6} {'lin its':>7} {'peak MB':>8} "
+          f"{'shift mm':>8} {'bulge ml':>8} "
           f"{'pen mm':>8}", flush=True)
     for n, linear in ((n, lin) for n in args.sizes for lin in args.linear):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
@@ -72,7 +85,9 @@ def main() -> int:
         r = json.loads(lines[-1][7:])
         print(f"{n:>8} {linear:>8} {r['tets']:>8} {r['dofs']:>8} {r['mesh_s']:>7.0f} "
               f"{r['solve_s']:>8.0f} "
-              f"{r['assembly_s']:>7.0f} {r['linear_s']:>7.0f} {r['newton']:>6} "
+              f"{r['assembly_s']:>7.0f} {r['linear_s']:>7.0f} {r['run_s']:>7.0f} "
+              f"{r['newton']:>6} "
+              f"{r['linear_its']:>7} "
               f"{r['peak_mb']:>8.0f} {r['shift_mm']:>8.2f} {r['bulge_ml']:>8.1f} "
               f"{r['penetration_mm']:>8.1e}", flush=True)
     return 0

@@ -33,6 +33,19 @@ BAD = [
     (["hemidisk", "--beta", "0", "--contact", "noslip", "--mesh-size", "0.3"], "infeasible"),
     (["study", "hemidisk-sector", "--workers", "0"], "workers"),
     (["study", "hemidisk-sector", "--alphas", "200"], "alpha"),
+    (["brain", "--flap", "custom"], "flap-centre"),
+    (["brain", "--swelling", "3"], "swelling"),
+    (["brain", "--steps", "0"], "steps"),
+    (["brain", "--tets", "10"], "tets"),
+    (["brain", "--material", "jelly"], "preset"),
+    (["brain", "--skull-edge-radius", "20"], "edge radius"),
+    (["brain", "--edge-exclusion", "-1"], "edge exclusion"),
+    (["brain", "--mesh", "missing/brain.npz"], "does not exist"),
+    (["brain", "--mesh", str(ROOT), "--labels", "seg.nii.gz"], "--mesh fixes the geometry"),
+    (["brain", "--fibres", "missing_V1.nii.gz"], "fibre image"),
+    (["brain", "--linear-solver", "krylov", "--element", "taylor-hood"], "krylov"),
+    (["study", "craniectomy", "--tets", "10"], "tets"),
+    (["study", "craniectomy", "--swelling", "0.1"], "swelling"),
 ]
 
 

@@ -84,7 +84,7 @@ class CraniectomyCase:
     def __post_init__(self) -> None:
         if self.flap not in FLAPS:
             raise InputError(f"unknown flap {self.flap!r}; choose one of {', '.join(FLAPS)}")
-        if self.flap == "custom" and self.flap_centre_mm is None:
+        if self.flap == "custom" and self.flap_centre_mm is None and self.mesh is None:
             raise InputError("a custom flap needs its centre: --flap-centre X Y Z (mm)")
         if self.swell not in SWELL_SIDES:
             raise InputError(
@@ -98,6 +98,11 @@ class CraniectomyCase:
             raise InputError("the krylov linear solver needs --element mini")
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
+        if not (isinstance(self.tets, int) and 1_000 <= self.tets <= 5_000_000):
+            raise InputError(f"tets = {self.tets!r} must be a whole number in [1000, 5000000]")
+        if self.element not in ("mini", "taylor-hood"):
+            raise InputError(f"unknown element {self.element!r}; choose mini or taylor-hood")
+        tissue_materials(self.material)  # an unknown preset fails here, before any meshing
         if not 0 < self.edge_radius_mm <= 10:
             raise InputError(f"edge radius {self.edge_radius_mm} mm must lie in (0, 10]")
         if not 0 <= self.edge_exclusion_mm <= 50:
@@ -105,6 +110,16 @@ class CraniectomyCase:
         if self.mesh is not None and not Path(self.mesh).exists():
             raise InputError(f"brain mesh {self.mesh} does not exist; build one with "
                              "`brainbulge mesh --out DIR` and pass DIR/brain.npz")
+        if self.mesh is not None:
+            geometry = {"--labels": self.labels, "--brain-volume": self.brain_volume_ml,
+                        "--flap-centre": self.flap_centre_mm,
+                        "--flap-diameter": self.flap_diameter_mm,
+                        "--label-map": None if self.label_map == "synthseg" else self.label_map}
+            given = [k for k, v in geometry.items() if v is not None]
+            if given:
+                raise InputError(
+                    f"--mesh fixes the geometry, so {', '.join(given)} would be ignored; drop "
+                    "them, or build a mesh with them by `brainbulge mesh` and pass that")
         if self.fibres is not None and not Path(self.fibres).is_file():
             raise InputError(f"fibre image {self.fibres} does not exist")
         if not self.name:

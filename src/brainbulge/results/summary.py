@@ -93,6 +93,7 @@ def solution_summary(
         "wall_time_s": round(sol.wall_time_s, 3),
         "assembly_time_s": round(sol.assembly_time_s, 3),
         "linear_solve_time_s": round(sol.solve_time_s, 3),
+        "linear_iterations": sol.linear_iterations,
         "elements": form.mesh.ne,
         "dofs": form.fes.ndof,
         "max_displacement": float(fields["u_magnitude"].max()),

@@ -85,6 +85,7 @@ class Solution:
     wall_time_s: float = 0.0
     assembly_time_s: float = 0.0
     solve_time_s: float = 0.0
+    linear_iterations: int = 0  # Krylov iterations in all (0 with a direct solver)
 
     @property
     def newton_iterations(self) -> int:
@@ -464,6 +465,8 @@ class NewtonSolver:
         sol.wall_time_s = time.perf_counter() - start
         sol.assembly_time_s = self.t_assembly
         sol.solve_time_s = self.t_solve
+        stats = getattr(self.linear, "stats", None)
+        sol.linear_iterations = int(sum(stats.iterations)) if stats is not None else 0
         return sol
 
 
