@@ -35,6 +35,13 @@ def add_parser(sub: Any) -> None:
         help="target Js (default 1.2 for a sector, 1.3 for a disk)",
     )
     p.add_argument("--contact", choices=("sliding", "noslip"), default="sliding")
+    p.add_argument(
+        "--contact-method",
+        choices=("active-set", "augmented"),
+        default="active-set",
+        help="sliding contact by exact nodal multipliers (primal-dual active set) or by an "
+        "augmented Lagrangian at integration points (slower; for comparison)",
+    )
     p.add_argument("--radius", type=float, default=1.0, help="hemidisk radius R [length]")
     p.add_argument("--mesh-size", type=float, default=0.05, help="element size [units of R]")
     p.add_argument(
@@ -72,6 +79,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "disk": disk,
         "swelling": swelling,
         "contact": args.contact,
+        "contact_method": args.contact_method,
         "R": args.radius,
         "mesh_size": args.mesh_size,
         "corner_mesh_size": args.corner_mesh_size,

@@ -70,6 +70,15 @@ class RigidSkull2D:
 
     def gap_numpy(self, x: np.ndarray) -> np.ndarray:
         """``g`` at points ``x`` of shape (n, 2) [length]."""
+        return self.gap_and_normal(x)[0]
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``g`` and ``grad g`` at points ``x`` of shape (n, 2) [length, -].
+
+        ``grad g`` is the unit vector from the nearest point of the core to ``x`` (pointing
+        out of the skull), zero inside the core; with it the skull also serves the exact
+        active-set contact (:mod:`brainbulge.solver.point_contact`).
+        """
         R1, R2, half, rho = self._core
         th = math.radians(self.center_deg)
         xr = x[:, 0] * math.cos(th) + x[:, 1] * math.sin(th)
@@ -80,5 +89,14 @@ class RigidSkull2D:
         ey = np.where(delta > 0, math.sin(half), -math.sin(half))
         ex = math.cos(half)
         t = np.clip(xr * ex + yr * ey, R1, R2)
-        d_end = np.hypot(xr - t * ex, yr - t * ey)
-        return np.where(np.abs(delta) < half, d_end, band) - rho
+        dx, dy = xr - t * ex, yr - t * ey
+        d_end = np.hypot(dx, dy)
+        opening = np.abs(delta) < half
+        g = np.where(opening, d_end, band) - rho
+        sign = np.where(R1 - r > 0, -1.0, np.where(r - R2 > 0, 1.0, 0.0))
+        safe_r = np.maximum(r, 1e-300)
+        safe_d = np.maximum(d_end, 1e-300)
+        gxr = np.where(opening, dx / safe_d, sign * xr / safe_r)
+        gyr = np.where(opening, dy / safe_d, sign * yr / safe_r)
+        c, s = math.cos(th), math.sin(th)
+        return g, np.column_stack([gxr * c - gyr * s, gxr * s + gyr * c])

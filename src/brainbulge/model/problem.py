@@ -33,10 +33,32 @@ class Obstacle(Protocol):
 
 @dataclass
 class Contact:
-    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``."""
+    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``.
+
+    ``method``: ``"active-set"``, exact multipliers at the boundary nodes by a primal-dual
+    active set (needs ``obstacle.gap_and_normal`` on point arrays); ``"augmented"``, an
+    augmented Lagrangian on the symbolic gap ``obstacle.gap``; ``"auto"``, the active set
+    when the obstacle offers point arrays, else the augmented Lagrangian.
+    """
 
     boundary: str
     obstacle: Obstacle
+    method: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.method not in CONTACT_METHODS:
+            raise InputError(f"unknown contact method {self.method!r}; choose one of "
+                             f"{', '.join(CONTACT_METHODS)}")
+
+    @property
+    def active_set(self) -> bool:
+        """Whether this contact is solved with exact multipliers at the nodes."""
+        if self.method == "auto":
+            return hasattr(self.obstacle, "gap_and_normal")
+        return self.method == "active-set"
+
+
+CONTACT_METHODS = ("auto", "active-set", "augmented")
 
 
 @dataclass

@@ -75,6 +75,22 @@ def vertex_fields(
     return VertexFields(points, cells, regions, names, point_data, cell_data)
 
 
+def add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
+    """Point data ``contact_pressure`` [kPa] and ``contact_status`` (1 in contact with the
+    obstacle, 0 separated from it, -1 off the contact boundaries: clamped base, 3D flap,
+    interior). Exact multipliers of the active-set contacts; empty fields without them."""
+    status = -np.ones(len(vf.points))
+    pressure = np.zeros(len(vf.points))
+    for pc in form.point_contacts:
+        pc.update(form.gfu.vec.FV().NumPy())
+        nv = len(pc.vertices)
+        touching = (pc.lam[:nv] > 0) | (np.abs(pc.g[:nv]) < 1e-6 * form.h)
+        status[pc.vertices] = touching.astype(float)
+        pressure[pc.vertices] = pc.lam[:nv]
+    vf.point_data["contact_pressure"] = pressure
+    vf.point_data["contact_status"] = status
+
+
 def write_vtu(path: Path, vf: VertexFields) -> Path:
     """Write the fields to a VTU file (ParaView, VisIt, meshio)."""
     dim = vf.points.shape[1]

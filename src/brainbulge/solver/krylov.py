@@ -534,6 +534,8 @@ class BlockKrylovSolver:
             log.debug("Krylov iterations %d > %.2g x %d: AMG refresh", its,
                       self.refresh_factor, self._ref_iterations)
             self._refresh_requested = True
+        log.debug("    %s: %d iterations, relative residual %.1e (%.1f s)", self.method, its,
+                  res, time.perf_counter() - t0)
         self.stats.solves += 1
         self.stats.iterations.append(its)
         self.stats.residuals.append(res)

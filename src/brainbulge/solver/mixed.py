@@ -105,7 +105,7 @@ class MixedForm:
         X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
         self.point_contacts: list[PointContact] = []
         for c in problem.contacts:
-            if not hasattr(c.obstacle, "gap"):  # an obstacle known only on point arrays
+            if c.active_set:  # exact multipliers at the nodes
                 self.point_contacts.append(PointContact(self, c.boundary, c.obstacle))
                 continue
             region = mesh.Boundaries(c.boundary)

@@ -109,7 +109,7 @@ class PointContact:
                     rows.append(k * dim + i)
                     cols.append(off + dof)
                     vals.append(beta)
-            X = np.vstack([X, np.array(Xe)])
+            X = np.vstack([X, _curved_midpoints(mesh, np.array(Xe))])
             weights = np.concatenate([weights, e_weight])
         self.X = X
         self.vertices = verts  # mesh vertex numbers of the first points
@@ -235,3 +235,18 @@ def _edge_bubble_midpoint_value(mesh: ngs.Mesh, V: ngs.FESpace) -> float:
     gf.vec[V.GetDofNrs(ngs.NodeId(ngs.EDGE, edge.nr))[0]] = 1
     a, b = (np.array(mesh.vertices[v.nr].point) for v in edge.vertices)
     return float(gf(mesh(*((a + b) / 2)))[0])
+
+
+def _curved_midpoints(mesh: ngs.Mesh, chord_mid: np.ndarray) -> np.ndarray:
+    """Midpoints of boundary edges on the (curved, ``mesh.Curve``) boundary, given the
+    midpoints of their chords: a chord midpoint lies inside a circle of radius R by
+    ``h^2/(8R)``, which at coarse meshes exceeds the initial-gap tolerance."""
+    from scipy.spatial import cKDTree
+
+    dim = mesh.dim
+    ref = [(0.5, 0.0, 0.0)] if dim == 2 else [(0.5, 0.0, 0.0), (0.5, 0.5, 0.0), (0.0, 0.5, 0.0)]
+    mips = mesh.MapToAllElements(ngs.IntegrationRule(ref, [1.0] * len(ref)), ngs.BND)
+    X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
+    candidates = np.asarray(X(mips)).reshape(-1, dim)
+    _, nearest = cKDTree(candidates).query(chord_mid)
+    return candidates[nearest]

@@ -46,7 +46,12 @@ from brainbulge.results.brain_metrics import (
     midline_shift_mm,
     monro_z_range_mm,
 )
-from brainbulge.results.export import VertexFields, vertex_fields, write_vtu
+from brainbulge.results.export import (
+    VertexFields,
+    add_contact_fields,
+    vertex_fields,
+    write_vtu,
+)
 from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
@@ -93,7 +98,7 @@ def run_brain(
     fibres = _fibres(case, bm)
     summary = brain_summary(case, bm, form, solver, sol, fibres)
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
-    _add_contact_fields(vf, form)
+    add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     np.savez_compressed(
         out_dir / "fields.npz",
@@ -202,21 +207,6 @@ def _mean_parenchyma_pressure(form: MixedForm) -> float:
     )
     vol = ngs.Integrate(mask, form.mesh)
     return float(ngs.Integrate(-form.p * mask, form.mesh) / vol)
-
-
-def _add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
-    """Point data ``contact_pressure`` [kPa] and ``contact_status`` (1 in contact with the
-    skull, 0 separated from it, -1 not on the skull boundary: flap, base, interior)."""
-    status = -np.ones(len(vf.points))
-    pressure = np.zeros(len(vf.points))
-    for pc in form.point_contacts:
-        pc.update(form.gfu.vec.FV().NumPy())
-        nv = len(pc.vertices)
-        touching = (pc.lam[:nv] > 0) | (np.abs(pc.g[:nv]) < 1e-6 * form.h)
-        status[pc.vertices] = touching.astype(float)
-        pressure[pc.vertices] = pc.lam[:nv]
-    vf.point_data["contact_pressure"] = pressure
-    vf.point_data["contact_status"] = status
 
 
 def section_figure(

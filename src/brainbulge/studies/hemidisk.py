@@ -23,7 +23,12 @@ import numpy as np
 from brainbulge.errors import ConvergenceError
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.model.problem import case_from_config
-from brainbulge.results.export import VertexFields, vertex_fields, write_vtu
+from brainbulge.results.export import (
+    VertexFields,
+    add_contact_fields,
+    vertex_fields,
+    write_vtu,
+)
 from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
 from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.summary import solution_summary
@@ -69,6 +74,7 @@ def run_hemidisk(
     }
     summary["swelling_area_ratio_expected"] = _expected_area_ratio(case)
     vf = vertex_fields(form, centre)
+    add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
     state = "" if sol.converged else f" (stopped at load {sol.load:.3f})"
