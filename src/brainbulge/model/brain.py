@@ -56,6 +56,7 @@ class CraniectomyCase:
         linear_solver: ``pardiso`` (direct) or ``krylov`` (GMRES + AMG blocks, MINI only,
             for large meshes).
         steps: initial load steps.
+        compile: compile the energy to machine code (a one-off ~10 s; assembly ~3.5x faster).
         edge_radius_mm: radius of the rounded cut edge of the skull at the flap [mm].
         edge_exclusion_mm: band around the flap rim left out of ``max_*`` outputs [mm].
         name: label of the scenario.
@@ -76,6 +77,7 @@ class CraniectomyCase:
     element: str = "mini"
     linear_solver: str = "pardiso"
     steps: int = 4
+    compile: bool = True
     edge_radius_mm: float = 3.0
     edge_exclusion_mm: float = 5.0
     name: str = ""

@@ -89,7 +89,7 @@ def run_brain(
     out_dir.mkdir(parents=True, exist_ok=True)
     bm = brain_mesh if brain_mesh is not None else brain_mesh_for(case)
     problem = brain_problem(bm, case)
-    form = MixedForm(problem, element=case.element, compile_energy=True)
+    form = MixedForm(problem, element=case.element, compile_energy=case.compile)
     solver = NewtonSolver(
         form,
         SolverOptions(steps=case.steps, progress=progress, linear_solver=case.linear_solver),
