@@ -30,17 +30,22 @@ STIFF = MooneyRivlin(0.28, 333.0)
 AMG = {"max_coarse": 30}
 
 
-@pytest.fixture(scope="module")
-def swollen():
-    """Form, Newton solver and the tangent/right-hand side of a Newton step at a swollen
-    state (load 0.7 of Js = 1.3 converged, then the load raised to 1)."""
+def _inclusion_problem() -> Problem:
+    """A soft swelling sphere (Js 1.3) in a stiff ball, octant with symmetry planes."""
     mesh = inclusion_mesh(3, A=0.3, h=0.3, h_inclusion=0.15)
-    problem = Problem(
+    return Problem(
         mesh,
         {"inclusion": SOFT, "matrix": STIFF},
         {"inclusion": 1.3},
         clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
     )
+
+
+@pytest.fixture(scope="module")
+def swollen():
+    """Form, Newton solver and the tangent/right-hand side of a Newton step at a swollen
+    state (load 0.7 of Js = 1.3 converged, then the load raised to 1)."""
+    problem = _inclusion_problem()
     form = MixedForm(problem, element="mini")
     ns = NewtonSolver(form, SolverOptions(tolerance=1e-10))
     for load in (0.4, 0.7):
@@ -208,13 +213,7 @@ def test_forcing_terms_follow_the_residual_ratio() -> None:
 def test_inexact_newton_reaches_the_direct_solution() -> None:
     """Newton with Krylov at Eisenstat-Walker tolerances converges to the same state as
     Newton with the direct solver, in about as many iterations."""
-    mesh = inclusion_mesh(3, A=0.3, h=0.3, h_inclusion=0.15)
-    problem = Problem(
-        mesh,
-        {"inclusion": SOFT, "matrix": STIFF},
-        {"inclusion": 1.3},
-        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
-    )
+    problem = _inclusion_problem()
     sols = {}
     for linear in ("pardiso", "krylov"):
         form = MixedForm(problem, element="mini")
