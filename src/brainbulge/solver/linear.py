@@ -46,6 +46,12 @@ class PardisoSolver:
                 break
             x = x + self._solver.solve(upper, defect)
         self._solver.free_memory(everything=True)
+        residual = np.linalg.norm(r - K @ x) / max(norm_r, 1e-300)
+        if not residual <= 1e-6:  # also NaN
+            raise ConvergenceError(
+                f"the direct solver lost accuracy (relative residual {residual:.1e}); the "
+                "matrix is near singular: check the boundary conditions and the mesh"
+            )
         return _checked(x)
 
 
