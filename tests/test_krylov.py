@@ -224,3 +224,30 @@ def test_inexact_newton_reaches_the_direct_solution() -> None:
     free = np.abs(x_d) > 0
     assert np.max(np.abs(x_k - x_d)) <= 1e-6 * np.max(np.abs(x_d[free]))
     assert it_k <= it_d + 3
+
+
+def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -> None:
+    """A symmetric-mode result that misses 1e-6 (as on contact saddle points of the 111k-tet
+    brain) is replaced by unsymmetric LU; a matrix neither mode solves raises."""
+    _, _, K, r = swollen
+
+    class Broken:  # a factorisation whose solutions are 3x too large: refinement diverges
+        def __init__(self, inner):
+            self.inner = inner
+
+        def factorize(self, A):
+            self.inner.factorize(A)
+
+        def solve(self, A, b):
+            return 3.0 * self.inner.solve(A, b)
+
+        def free_memory(self, everything=False):
+            self.inner.free_memory(everything=everything)
+
+    solver = PardisoSolver()
+    solver._symmetric = Broken(solver._symmetric)
+    x = solver.solve(K, r)
+    assert np.linalg.norm(K @ x - r) <= 1e-9 * np.linalg.norm(r)
+    solver._general = Broken(solver._general)
+    with pytest.raises(ConvergenceError, match="lost accuracy"):
+        solver.solve(K, r)
