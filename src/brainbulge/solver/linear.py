@@ -33,8 +33,8 @@ class PardisoSolver:
     refined against the full matrix until ``|K x - r| <= 1e-10 |r|``. Some contact saddle
     points defeat the symmetric mode (111k-tet brain, ~3,400 active contact rows: relative
     residual 3e-2 after refinement, with or without weighted matching); unsymmetric LU with
-    partial pivoting solves them to 1e-16 in 1.7x the time, so it takes over when the
-    symmetric result misses 1e-6.
+    partial pivoting solves them to 1e-16 in 1.7x the time, so it takes over, for the rest of
+    the run, when the symmetric result misses 1e-6.
     """
 
     def __init__(self) -> None:
@@ -43,12 +43,18 @@ class PardisoSolver:
 
         self._symmetric = pypardiso.PyPardisoSolver(mtype=-2)
         self._general = pypardiso.PyPardisoSolver(mtype=11)
+        self._lu_only = False  # after one failure of the symmetric mode: its matrices fail on
 
     def solve(self, K: sp.csr_matrix, r: np.ndarray) -> np.ndarray:
         norm_r = max(float(np.linalg.norm(r)), 1e-300)
-        x, residual = _refined(self._symmetric, sp.triu(K, format="csr"), K, r, norm_r)
+        residual = np.inf
+        if not self._lu_only:
+            x, residual = _refined(self._symmetric, sp.triu(K, format="csr"), K, r, norm_r)
         if not residual <= 1e-6:  # also NaN
-            log.debug("PARDISO symmetric mode: relative residual %.1e; unsymmetric LU", residual)
+            if not self._lu_only:
+                log.debug("PARDISO symmetric mode: relative residual %.1e; unsymmetric LU "
+                          "from now on", residual)
+            self._lu_only = True
             x, residual = _refined(self._general, K, K, r, norm_r)
         if not residual <= 1e-6:
             raise ConvergenceError(
