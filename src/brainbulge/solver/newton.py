@@ -138,7 +138,7 @@ class NewtonSolver:
         self._last_active: list[np.ndarray] = []
         # inexact Newton (Eisenstat-Walker): relative tolerance of an iterative linear solve
         self.inexact = self.opt.linear_solver == "krylov"
-        self.eta = ETA_MAX
+        self.eta = self.eta_cap = ETA_MAX
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
@@ -251,7 +251,7 @@ class NewtonSolver:
         # Newton step pushed into the skull (left alone, such a weakly active point makes
         # the active set cycle and the line search halve every step)
         self._forced = [np.zeros(pc.n_points, dtype=bool) for pc in pcs]
-        self.eta = ETA_MAX
+        self.eta = self.eta_cap = ETA_MAX
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
         for it in range(self.opt.max_iterations + 1):
@@ -298,7 +298,12 @@ class NewtonSolver:
                     log.debug("    step %.3g, %d active contact points%s", s,
                               sum(int(a.sum()) for a in self._last_active),
                               f", Krylov rtol {self.eta:.1e}" if self.inexact else "")
-                    self.eta = forcing_term(self.eta, trial / norm, trial, self.opt.tolerance)
+                    if s == 1.0 and trial > 0.5 * norm:
+                        # a full step that did not halve the residual: the linear residual
+                        # (unscaled, contact rows weighted by r) was too loose a measure
+                        self.eta_cap = max(ETA_MIN, 1e-2 * min(self.eta, self.eta_cap))
+                    self.eta = min(self.eta_cap, forcing_term(self.eta, trial / norm, trial,
+                                                              self.opt.tolerance))
                     norm = trial
                     break
                 x.data = x0
