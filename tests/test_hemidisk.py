@@ -221,3 +221,25 @@ def test_bad_input_one_line(kw, match) -> None:
         case.geometry  # noqa: B018
         case.tissue_material()
     assert "\n" not in str(err.value)
+
+
+def test_contact_fields_in_the_output(sliding) -> None:
+    """The VTU's contact pressure: positive where tissue presses on the skull, zero on the
+    clamped base; status 1 there, -1 on the base (its two ends lie on the skull too)."""
+    from brainbulge.results.export import add_contact_fields, vertex_fields
+
+    case, problem, form, solver, sol = sliding
+    vf = vertex_fields(form, np.zeros(2))
+    add_contact_fields(vf, form)
+    p, status = vf.point_data["contact_pressure"], vf.point_data["contact_status"]
+    X = vf.points
+    arc = np.abs(np.linalg.norm(X, axis=1) - case.R) < 1e-6
+    on_base = (np.abs(X[:, 1]) < 1e-9) & ~arc
+    assert np.all(p >= 0) and np.all(p[on_base] == 0)
+    assert np.all(status[on_base] == -1)
+    pressed = arc & (status == 1)
+    assert pressed.sum() > 0.5 * arc.sum()
+    assert np.all(p[~arc & ~on_base] == 0)  # interior vertices carry no contact pressure
+    # the exact nodal multipliers match the pressure field of the solver
+    pc = form.point_contacts[0]
+    np.testing.assert_array_equal(p[pc.vertices], pc.lam[: len(pc.vertices)])

@@ -9,6 +9,8 @@ from __future__ import annotations
 import ngsolve as ngs
 import numpy as np
 import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg  # noqa: F401 - sp.linalg
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.geometry.inclusion import inclusion_mesh
@@ -251,3 +253,23 @@ def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -
     solver._general = Broken(solver._general)
     with pytest.raises(ConvergenceError, match="lost accuracy"):
         solver.solve(K, r)
+
+
+def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:
+    """``K + r B^T B`` with ``b - r B^T c`` (what both linear solvers get) solves the plain
+    saddle point ``[[K, -B^T], [-B, 0]] [dx, dlam] = [b, c]`` exactly."""
+    from brainbulge.solver.newton import _augmented
+
+    form, ns, K, r = swollen
+    rng = np.random.default_rng(3)
+    iu = np.flatnonzero(ns.is_u_free)
+    rows = rng.choice(iu, size=12, replace=False)
+    B = sp.csr_matrix((rng.uniform(0.5, 2.0, 12), (np.arange(12), rows)), shape=(12, K.shape[0]))
+    c = rng.normal(size=12)
+    plain = sp.bmat([[K, -B.T], [-B, None]], format="csr")
+    ref = sp.linalg.spsolve(plain.tocsc(), np.concatenate([r, c]))
+    Ka, ba = _augmented(K, r, B, c, ns.is_u_free)
+    aug = sp.bmat([[Ka, -B.T], [-B, None]], format="csr")
+    x = sp.linalg.spsolve(aug.tocsc(), np.concatenate([ba, c]))
+    np.testing.assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+    assert not np.allclose(Ka.toarray(), K.toarray())  # the matrix did change

@@ -145,3 +145,29 @@ def test_closed_domain_is_infeasible(box2d) -> None:
 def test_closed_domain_without_swelling_is_fine(box2d) -> None:
     problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.0}, clamped="xmin|ymin|xmax|free")
     assert solve(problem).converged
+
+
+def test_energy_compiled_to_machine_code_gives_the_same_residual_and_tangent() -> None:
+    """``compile_energy=True`` (on for brain cases) changes the speed, not the numbers."""
+    import numpy as np
+
+    from brainbulge.geometry.inclusion import inclusion_mesh
+    from brainbulge.materials import MooneyRivlin
+    from brainbulge.model import Problem
+    from brainbulge.solver import MixedForm, NewtonSolver
+
+    mesh = inclusion_mesh(3, A=0.3, h=0.4, h_inclusion=0.2)
+    problem = Problem(mesh, {"inclusion": MooneyRivlin(0.03, 33.3),
+                             "matrix": MooneyRivlin(0.28, 333.0)}, {"inclusion": 1.2},
+                      clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"})
+    out = []
+    for native in (False, True):
+        form = MixedForm(problem, element="mini", compile_energy=native)
+        form.set_load(0.8)
+        x = form.gfu.vec
+        x.FV().NumPy()[:] = np.random.default_rng(0).normal(scale=1e-3, size=len(x))
+        ns = NewtonSolver(form)
+        out.append((ns.residual(x), ns.tangent(x).toarray()))
+    (r0, K0), (r1, K1) = out
+    np.testing.assert_allclose(r1, r0, rtol=1e-9, atol=1e-12 * np.abs(r0).max())
+    np.testing.assert_allclose(K1, K0, rtol=1e-9, atol=1e-12 * np.abs(K0).max())
