@@ -273,3 +273,47 @@ def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:
     x = sp.linalg.spsolve(aug.tocsc(), np.concatenate([ba, c]))
     np.testing.assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
     assert not np.allclose(Ka.toarray(), K.toarray())  # the matrix did change
+
+
+def _nodal_constraints(form, ns, K, m: int, seed: int = 5):
+    """``m`` constraint rows ``B_i = A_i n_i^T`` on distinct vertices (unit normals ``n_i``),
+    as the P1 contact points give them, and a right-hand side ``c``."""
+    rng = np.random.default_rng(seed)
+    layout = displacement_layout(form, ns.free)
+    iu = np.flatnonzero(ns.is_u_free)
+    v_all, count = np.unique(layout.vertex, return_counts=True)
+    verts = rng.choice(v_all[count == layout.dim], size=m, replace=False)  # wholly free
+    rows, cols, vals = [], [], []
+    for i, v in enumerate(verts):
+        n = rng.normal(size=layout.dim)
+        n *= rng.uniform(0.5, 2.0) / np.linalg.norm(n)
+        for comp in range(layout.dim):
+            rows.append(i)
+            cols.append(iu[(layout.vertex == v) & (layout.component == comp)][0])
+            vals.append(n[comp])
+    B = sp.csr_matrix((vals, (rows, cols)), shape=(m, K.shape[0]))
+    return B, rng.normal(size=m)
+
+
+def test_nodal_elimination_solves_the_active_set_saddle_point(swollen) -> None:
+    """Eliminating nodal normal constraints (projected system, same size, no multiplier
+    rows) gives the plain saddle point's displacements, pressures and multipliers, with the
+    direct solver and with GMRES + AMG on the projected matrix."""
+    from brainbulge.solver.newton import NodalElimination
+
+    form, ns, K, r = swollen
+    B, c = _nodal_constraints(form, ns, K, m=15)
+    assert NodalElimination.applies(B)
+    assert not NodalElimination.applies(sp.vstack([B, B[:1]]).tocsr())  # a shared DOF
+    plain = sp.bmat([[K, -B.T], [-B, None]], format="csr")
+    ref = sp.linalg.spsolve(plain.tocsc(), np.concatenate([r, c]))
+    elim = NodalElimination(K, B, c, ns.is_u_free)
+    Kp, bp = elim.system(r)
+    assert Kp.shape == K.shape
+    np.testing.assert_allclose(abs(Kp - Kp.T).max(), 0.0, atol=1e-12 * abs(Kp).max())
+    x = elim.recover(_direct(Kp, bp))
+    np.testing.assert_allclose(x, ref, rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+    assert np.abs(ref[K.shape[0]:]).min() > 0  # the multipliers are not trivially zero
+    krylov = BlockKrylovSolver.from_form(form)
+    xk = elim.recover(krylov.solve(Kp, bp, rtol=1e-10))
+    np.testing.assert_allclose(xk, ref, rtol=1e-5, atol=1e-7 * np.abs(ref).max())
