@@ -189,7 +189,9 @@ class NewtonSolver:
         ``self.res`` must hold ``R(x)``, as in :meth:`newton`. Without point contacts
         ``K dx = R``. With them (primal-dual active set, see :mod:`point_contact`) inactive
         multipliers go to zero (``dlam_I = lam_I``) and ``(dx, dlam_A)`` solves
-        ``[[K, -B_A^T], [-B_A, 0]] [dx, dlam_A] = [R + B_I^T lam_I, -A g_A]``.
+        ``[[K, -B_A^T], [-B_A, 0]] [dx, dlam_A] = [R + B_I^T lam_I, -A g_A]``, with the
+        constraints eliminated at their nodes (:class:`NodalElimination`) when each acts on
+        one node, else in augmented form (:func:`_augmented`).
         """
         K = self.tangent(x)
         a = self.form.a
@@ -520,7 +522,8 @@ def _augmented(K: sp.csr_matrix, b: np.ndarray, B: sp.csr_matrix, c: np.ndarray,
     """The active-set system ``[[K, -B^T], [-B, 0]] [dx, dlam] = [b, c]`` in augmented form
     ``K + r B^T B``, ``b - r B^T c`` (the same solution, as ``B dx = -c``).
 
-    Both linear solvers need it. PARDISO's pivoting on the plain saddle point (zero block
+    Used when constraint rows share DOFs (P2 contact points: an edge midpoint's row reaches
+    its ends), where :class:`NodalElimination` does not apply. PARDISO's pivoting on the plain saddle point (zero block
     under thousands of contact rows) returned residuals of 1e17 on the 111k-tet brain, where
     the augmented matrix solves to 1e-12. The AMG of the Krylov solver's displacement block
     sees the constraints as stiff normal springs, and the multipliers' Schur complement becomes
