@@ -1,8 +1,8 @@
 """Benchmark of one 3D craniectomy scenario (left flap, both-sided swelling, Js 1 -> 1.1).
 
 Run ``python benchmarks/bench_brain.py [--sizes 30000 100000 400000] [--steps 2]
-[--variants baseline direct krylov]``. Each (size, variant) runs in a fresh subprocess (its
-own peak memory): the ICBM152 mesh is built (or reused from ``--cache DIR``), then solved.
+[--variants baseline direct krylov] [--edge-radius MM]``. Each (size, variant) runs in a
+fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from ``--cache DIR``), then solved.
 
 Variants (the same mesh, model and outputs):
 
@@ -34,7 +34,8 @@ VARIANTS = {
 }
 
 
-def one(target_tets: int, steps: int, cache: Path, variant: str) -> dict:
+def one(target_tets: int, steps: int, cache: Path, variant: str,
+        edge_radius_mm: float = 3.0) -> dict:
     import logging
 
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
@@ -56,7 +57,8 @@ def one(target_tets: int, steps: int, cache: Path, variant: str) -> dict:
     t_mesh = time.perf_counter() - t0
     out = cache / f"run_{target_tets}_{variant}"
     t1 = time.perf_counter()
-    s = run_brain({"flap": "left", "swell": "both", "steps": steps, **VARIANTS[variant]},
+    s = run_brain({"flap": "left", "swell": "both", "steps": steps,
+                   "edge_radius_mm": edge_radius_mm, **VARIANTS[variant]},
                   out, brain_mesh=bm)
     t_run = time.perf_counter() - t1
     return {
@@ -90,17 +92,21 @@ def main() -> int:
     parser.add_argument("--cache", type=Path, default=Path("bench-brain"))
     parser.add_argument("--variants", nargs="+", choices=list(VARIANTS),
                         default=["direct", "krylov"], help="what to compare (see above)")
+    parser.add_argument("--edge-radius", type=float, default=3.0,
+                        help="rounded cut edge of the skull at the flap [mm] (the brain "
+                             "command's --skull-edge-radius)")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        r = one(args.one, args.steps, args.cache, args.variants[0])
+        r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
     results: dict[tuple[int, str], dict] = {}
     for n, variant in ((n, v) for n in args.sizes for v in args.variants):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
-               "--cache", str(args.cache), "--variants", variant]
+               "--cache", str(args.cache), "--variants", variant,
+               "--edge-radius", str(args.edge_radius)]
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:
