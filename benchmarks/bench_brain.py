@@ -2,7 +2,8 @@
 
 Run ``python benchmarks/bench_brain.py [--sizes 30000 100000 400000] [--steps 2]
 [--variants baseline direct krylov] [--edge-radius MM]``. Each (size, variant) runs in a
-fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from ``--cache DIR``), then solved.
+fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from
+``--cache DIR``), then solved.
 
 Variants (the same mesh, model and outputs):
 
