@@ -525,9 +525,10 @@ def _augmented(K: sp.csr_matrix, b: np.ndarray, B: sp.csr_matrix, c: np.ndarray,
     Used when constraint rows share DOFs (P2 contact points: an edge midpoint's row reaches
     its ends), where :class:`NodalElimination` does not apply. PARDISO's pivoting on the
     plain saddle point (zero block under thousands of contact rows) returned residuals of
-    1e17 on the 111k-tet brain, where the augmented matrix solves to 1e-12. The AMG of the Krylov solver's displacement block
-    sees the constraints as stiff normal springs, and the multipliers' Schur complement becomes
-    ``~ -I / r``, which a diagonal approximates well (Krylov iterations halved). ``r`` makes
+    1e17 on the 111k-tet brain, where the augmented matrix solves to 1e-12. The AMG of the
+    Krylov solver's displacement block sees the constraints as stiff normal springs, and the
+    multipliers' Schur complement becomes ``~ -I / r``, which a diagonal approximates well
+    (Krylov iterations halved). ``r`` makes
     ``r |B_i|^2`` ten times the typical diagonal stiffness of a displacement DOF.
     """
     d = np.abs(K.diagonal()[is_u])
