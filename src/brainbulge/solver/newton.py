@@ -183,7 +183,9 @@ class NewtonSolver:
         self.t_assembly += time.perf_counter() - t0
         return K[self.free][:, self.free]
 
-    def newton_direction(self, x: ngs.BaseVector) -> tuple[ngs.BaseVector, list[np.ndarray]]:
+    def newton_direction(
+        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None
+    ) -> tuple[ngs.BaseVector, list[np.ndarray]]:
         """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``.
 
         ``self.res`` must hold ``R(x)``, as in :meth:`newton`. Without point contacts
@@ -193,7 +195,8 @@ class NewtonSolver:
         constraints eliminated at their nodes (:class:`NodalElimination`) when each acts on
         one node, else in augmented form (:func:`_augmented`).
         """
-        K = self.tangent(x)
+        if K is None:  # a retry at the same state (new active set) reuses the tangent
+            K = self.tangent(x)
         a = self.form.a
         rhs = x.CreateVector()
         rhs.data = self.res  # residual at x: newton() always evaluates x last
@@ -271,12 +274,15 @@ class NewtonSolver:
                 return True, it, norm
             if not np.isfinite(norm) or it == self.opt.max_iterations:
                 return False, it, norm
+            K_x = None  # the tangent at x0, shared by the retries of this iteration
             x0 = x.CreateVector()
             x0.data = x
             lam0 = [pc.lam.copy() for pc in pcs]
             for attempt in range(4):
                 try:
-                    dx, dlams = self.newton_direction(x)
+                    if K_x is None:
+                        K_x = self.tangent(x)
+                    dx, dlams = self.newton_direction(x, K_x)
                 except ConvergenceError:
                     if not self.inexact or self.eta <= ETA_MIN:
                         return False, it, norm
@@ -284,7 +290,7 @@ class NewtonSolver:
                     log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
                     self.eta = ETA_MIN
                     try:
-                        dx, dlams = self.newton_direction(x)
+                        dx, dlams = self.newton_direction(x, K_x)
                     except ConvergenceError:
                         return False, it, norm
                 s = 1.0
