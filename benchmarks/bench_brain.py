@@ -28,6 +28,8 @@ import sys
 import time
 from pathlib import Path
 
+from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
+
 VARIANTS = {
     "baseline": {"element": "taylor-hood", "linear_solver": "pardiso", "compile": False},
     "direct": {"element": "mini", "linear_solver": "pardiso", "compile": True},
@@ -36,7 +38,7 @@ VARIANTS = {
 
 
 def one(target_tets: int, steps: int, cache: Path, variant: str,
-        edge_radius_mm: float = 3.0) -> dict:
+        edge_radius_mm: float = EDGE_RADIUS_MM) -> dict:
     import logging
 
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
@@ -93,7 +95,7 @@ def main() -> int:
     parser.add_argument("--cache", type=Path, default=Path("bench-brain"))
     parser.add_argument("--variants", nargs="+", choices=list(VARIANTS),
                         default=["direct", "krylov"], help="what to compare (see above)")
-    parser.add_argument("--edge-radius", type=float, default=3.0,
+    parser.add_argument("--edge-radius", type=float, default=EDGE_RADIUS_MM,
                         help="rounded cut edge of the skull at the flap [mm] (the brain "
                              "command's --skull-edge-radius)")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)

@@ -13,6 +13,7 @@ import dataclasses
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, positive_float, start_run
+from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
 
 
 def add_parser(sub: Any) -> None:
@@ -50,7 +51,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")
     p.add_argument("--edge-exclusion", type=float, default=5.0,
                    help="band around the flap rim left out of max_*/min_* [mm]")
-    p.add_argument("--skull-edge-radius", type=float, default=3.0,
+    p.add_argument("--skull-edge-radius", type=float, default=EDGE_RADIUS_MM,
                    help="rounding radius of the skull's cut edge [mm]")
     add_output_options(p, "brain-out")
     p.set_defaults(func=run_command)

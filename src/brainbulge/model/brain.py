@@ -19,6 +19,7 @@ import numpy as np
 
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain import BrainMesh, to_ngsolve
+from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
 from brainbulge.materials import MooneyRivlin, preset
 from brainbulge.model.problem import Contact, Problem
 
@@ -78,7 +79,7 @@ class CraniectomyCase:
     linear_solver: str = "pardiso"
     steps: int = 4
     compile: bool = True
-    edge_radius_mm: float = 3.0
+    edge_radius_mm: float = EDGE_RADIUS_MM
     edge_exclusion_mm: float = 5.0
     name: str = ""
     extra: dict = field(default_factory=dict)

@@ -26,7 +26,7 @@ from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracrania
 from brainbulge.geometry.brain.labels import TISSUES, TissueImage
 from brainbulge.geometry.brain.quality import quality_stats
 from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane, tag_tissue
-from brainbulge.geometry.brain.skull import RigidSkull
+from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM, RigidSkull
 from brainbulge.geometry.brain.tetmesh import (
     element_size_for,
     mesh_intracranial_volume,
@@ -114,7 +114,7 @@ class BrainMesh:
         self.flaps[flap.name] = flap
         self.flap_faces[flap.name] = mask
 
-    def skull(self, flap: str | None = None, edge_radius_mm: float = 3.0) -> RigidSkull:
+    def skull(self, flap: str | None = None, edge_radius_mm: float = EDGE_RADIUS_MM) -> RigidSkull:
         """Rigid-skull obstacle with the given flap removed (``None``: intact skull)."""
         return RigidSkull(self.envelope, None if flap is None else self.flaps[flap],
                           edge_radius_mm)

@@ -21,12 +21,18 @@ import scipy.ndimage as ndi
 from brainbulge.geometry.brain.boundaries import Flap
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
 
+#: Default rounding radius of the cut edge [mm]. With 3 mm, meshes of >= 400k tets (edges
+#: ~3 mm) stalled at the flap rim: a node pressed on the rounded edge, its contact force times
+#: the edge's curvature above its own stiffness, crept around it (docs/design.md); 6 mm
+#: converged at 428k tets (docs/performance.md).
+EDGE_RADIUS_MM = 6.0
+
 
 class RigidSkull:
     """Rigid skull around ``envelope`` with an optional craniectomy ``flap`` (mm units)."""
 
     def __init__(self, envelope: IntracranialEnvelope, flap: Flap | None = None,
-                 edge_radius_mm: float = 3.0) -> None:
+                 edge_radius_mm: float = EDGE_RADIUS_MM) -> None:
         self.envelope = envelope
         self.flap = flap
         self.edge_radius_mm = float(edge_radius_mm)
