@@ -317,3 +317,18 @@ def test_nodal_elimination_solves_the_active_set_saddle_point(swollen) -> None:
     krylov = BlockKrylovSolver.from_form(form)
     xk = elim.recover(krylov.solve(Kp, bp, rtol=1e-10))
     np.testing.assert_allclose(xk, ref, rtol=1e-5, atol=1e-7 * np.abs(ref).max())
+
+
+def test_a_short_step_from_a_loose_krylov_solve_retries_tighter(monkeypatch) -> None:
+    """With a Krylov tolerance far too loose (0.5), the directions are poor and the line search
+    cuts them short; the solver solves such a direction again 100x tighter instead of creeping
+    on (without the retry this load step fails twice and is cut: 3 Newton solves, 18 its)."""
+    import brainbulge.solver.newton as newton
+
+    monkeypatch.setattr(newton, "ETA_MAX", 0.5)
+    form = MixedForm(_inclusion_problem(), element="mini")
+    ns = NewtonSolver(form, SolverOptions(steps=1, linear_solver="krylov"))
+    sol = ns.solve()
+    assert sol.converged
+    assert ns.tightened_solves >= 1
+    assert len(ns.history) == 1  # one Newton solve: no load-step cut

@@ -139,6 +139,7 @@ class NewtonSolver:
         # inexact Newton (Eisenstat-Walker): relative tolerance of an iterative linear solve
         self.inexact = self.opt.linear_solver == "krylov"
         self.eta = self.eta_cap = ETA_MAX
+        self.tightened_solves = 0  # directions solved again tighter after a short step
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
@@ -278,6 +279,7 @@ class NewtonSolver:
             x0 = x.CreateVector()
             x0.data = x
             lam0 = [pc.lam.copy() for pc in pcs]
+            tightened = False
             for attempt in range(4):
                 try:
                     if K_x is None:
@@ -305,6 +307,17 @@ class NewtonSolver:
                         s = 0.0  # retry the direction with the newly forced points
                         break
                     s *= 0.5
+                    if (s < SHORT_STEP and self.inexact and not tightened
+                            and self.eta > ETA_MIN and attempt < 3):
+                        # a short step from a loose Krylov solve: the direction, not the
+                        # model, may be what is poor; solve it again 100x tighter first
+                        tightened = True
+                        self.tightened_solves += 1
+                        self.eta = self.eta_cap = max(ETA_MIN, 1e-2 * self.eta)
+                        log.debug("    step %.3g at Krylov rtol %.1e: retrying tighter",
+                                  s, 1e2 * self.eta)
+                        s = 0.0
+                        break
                     if s < 1 / 1024:
                         x.data = x0
                         for pc, l0 in zip(pcs, lam0, strict=True):
@@ -599,6 +612,7 @@ class NodalElimination:
 
 ETA_MAX = 1e-4  # loosest relative tolerance of an inexact Newton solve
 ETA_MIN = 1e-10  # tightest
+SHORT_STEP = 0.25  # line-search steps below this get one tighter Krylov solve first
 
 
 def forcing_term(eta: float, ratio: float, norm: float, tolerance: float) -> float:
