@@ -114,6 +114,20 @@ def test_noslip_boundary_does_not_move(noslip) -> None:
     assert np.abs(u[on_skull]).max() < 1e-12
 
 
+def test_noslip_opening_stays_out_of_the_skull(noslip) -> None:
+    """The free opening boundary turns around the opening corners but cannot enter the rigid
+    skull's cut face (without the obstacle it went 0.027 R into it at h = 0.05)."""
+    case, problem, form, solver, sol = noslip
+    mesh = problem.mesh
+    q = quadrature_points(mesh, order=4, boundary=True)
+    on_opening = q(mesh.BoundaryCF({"opening": 1}, default=0)) > 0.5
+    x = q(ngs.CF((ngs.x, ngs.y)) + form.u)[on_opening]
+    gap, _ = case.skull.gap_and_normal(x)
+    assert gap.min() > -1e-2 * case.R  # between contact points: ~h^2 / edge radius
+    assert solver.max_penetration() < 1e-8 * case.R  # at the contact points
+    assert np.any(gap < 1e-6 * case.R)  # and it does touch the cut edge
+
+
 def test_mirror_symmetry(noslip) -> None:
     """Symmetric inputs: mirror-symmetric displacement, up to the discretisation error of a
     mesh that is not itself symmetric (< 1% of the largest displacement)."""

@@ -205,7 +205,7 @@ class PointContact:
     def max_penetration(self) -> float:
         """Largest ``max(-g, 0)`` at the contact points of the current state [length]."""
         self.update(self.form.gfu.vec.FV().NumPy())
-        return float(max(np.max(-self.g), 0.0))
+        return float(np.maximum(np.max(-self.g), 0.0)) + 0.0  # + 0.0: no -0.0 in reports
 
     def free_measure(self, tol: float) -> float:
         """Area of the boundary that is away from the obstacle by more than ``tol`` at rest."""
