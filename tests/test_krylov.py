@@ -319,10 +319,10 @@ def test_nodal_elimination_solves_the_active_set_saddle_point(swollen) -> None:
     np.testing.assert_allclose(xk, ref, rtol=1e-5, atol=1e-7 * np.abs(ref).max())
 
 
-def test_a_short_step_from_a_loose_krylov_solve_retries_tighter(monkeypatch) -> None:
-    """With a Krylov tolerance far too loose (0.5), the directions are poor and the line search
-    cuts them short; the solver solves such a direction again 100x tighter instead of creeping
-    on (without the retry this load step fails twice and is cut: 3 Newton solves, 18 its)."""
+def test_a_failed_line_search_on_a_loose_krylov_direction_retries_tighter(monkeypatch) -> None:
+    """With a Krylov tolerance far too loose (0.5), a direction can be so poor that the line
+    search finds no step; the solver then solves it again 100x tighter instead of giving up
+    (without the retry this load step fails twice and is cut: 3 Newton solves, 18 its)."""
     import brainbulge.solver.newton as newton
 
     monkeypatch.setattr(newton, "ETA_MAX", 0.5)
