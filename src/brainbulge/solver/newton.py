@@ -139,7 +139,7 @@ class NewtonSolver:
         # inexact Newton (Eisenstat-Walker): relative tolerance of an iterative linear solve
         self.inexact = self.opt.linear_solver == "krylov"
         self.eta = self.eta_cap = ETA_MAX
-        self.tightened_solves = 0  # directions solved again tighter after a short step
+        self.tightened_solves = 0  # directions solved again tighter after a failed line search
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
