@@ -171,6 +171,26 @@ def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
     assert solver.stats.setups == 3
 
 
+def test_an_initial_guess_saves_iterations_and_a_bad_one_is_dropped(swollen) -> None:
+    """A loose solution as the guess of a tighter solve (the Newton retry): fewer
+    iterations than from zero, the same tolerance relative to |r|; a guess worse than zero
+    costs nothing."""
+    form, _, K, r = swollen
+    solver = BlockKrylovSolver.from_form(form, amg=AMG)
+    loose = solver.solve(K, r, rtol=1e-3)
+    tight_from_zero = solver.solve(K, r, rtol=1e-8)
+    tight_from_loose = solver.solve(K, r, rtol=1e-8, x0=loose)
+    its = solver.stats.iterations
+    assert its[2] < its[1]
+    assert np.linalg.norm(r - K @ tight_from_loose) <= 1e-8 * np.linalg.norm(r)
+    assert np.linalg.norm(tight_from_loose - tight_from_zero) <= 1e-5 * np.linalg.norm(
+        tight_from_zero)
+    assert solver.solve(K, r, rtol=1e-3, x0=tight_from_zero) is not tight_from_zero
+    assert its[3] == 0  # already converged: returned at once
+    solver.solve(K, r, rtol=1e-8, x0=-1e3 * tight_from_zero)  # worse than zero: ignored
+    assert its[4] == its[1]
+
+
 def test_zero_right_hand_side(swollen) -> None:
     form, _, K, r = swollen
     solver = BlockKrylovSolver.from_form(form, amg=AMG)

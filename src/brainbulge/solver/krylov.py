@@ -54,6 +54,13 @@ log = logging.getLogger("brainbulge")
 
 METHODS = ("gmres", "minres")
 SCHUR = ("simple", "simple-diag", "mass")
+# Weak couplings of the SIMPLE Schur approximation dropped before its AMG. Its distance-2
+# stencil (B D^-1 B^T) has many weak entries that "strength: symmetric, theta 0" aggregates
+# as strong; dropping them below 0.05 sqrt(|S_ii S_jj|) made the AMG both cheaper and better.
+# Measured on the 111k-tet brain (left flap, both sides, krylov): one tangent 55 -> 37 GMRES
+# iterations and 0.10 -> 0.07 s per preconditioner application; the whole scenario 906 ->
+# 481 GMRES iterations, 13 -> 10 Newton iterations, 129 -> 69 s linear solves.
+SCHUR_DROP = 0.05
 
 
 # --- what the solver needs to know about the discretisation ----------------------------
@@ -345,6 +352,9 @@ class BlockKrylovSolver:
         reference: an SPD displacement matrix (free u DOFs) to build the displacement AMG on,
             once, instead of the tangent's displacement block (see
             :func:`reference_stiffness`).
+        schur_drop: with ``schur="simple"``, couplings of ``S~`` weaker than this times
+            ``sqrt(|S_ii S_jj|)`` are dropped and lumped onto the diagonal before its AMG
+            (see :data:`SCHUR_DROP`); 0 keeps ``S~`` whole.
     """
 
     def __init__(
@@ -360,7 +370,7 @@ class BlockKrylovSolver:
         refresh_factor: float = 1.5,
         amg: dict | None = None,
         reference: sp.spmatrix | None = None,
-        schur_drop: float = 0.0,
+        schur_drop: float = SCHUR_DROP,
     ) -> None:
         if method not in METHODS:
             raise InputError(f"unknown Krylov method {method!r}; choose one of {METHODS}")
@@ -521,13 +531,18 @@ class BlockKrylovSolver:
         return apply_tri
 
     # --- solve ---------------------------------------------------------------------------
-    def solve(self, K: sp.csr_matrix, r: np.ndarray, rtol: float | None = None) -> np.ndarray:
-        """``x`` with ``|r - K x| <= rtol |r|`` (true residual), else ConvergenceError."""
+    def solve(self, K: sp.csr_matrix, r: np.ndarray, rtol: float | None = None,
+              x0: np.ndarray | None = None) -> np.ndarray:
+        """``x`` with ``|r - K x| <= rtol |r|`` (true residual), else ConvergenceError.
+
+        ``x0``: an initial guess (e.g. the solution of a nearby system); the tolerance stays
+        relative to ``|r|``.
+        """
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
         A, Bt, C = self._update(K)
         with _single_threaded_blas():
-            x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C))
+            x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0)
         if self._ref_iterations is None:
             self._ref_iterations = max(its, 1)
         elif its > self.refresh_factor * self._ref_iterations:
@@ -547,7 +562,8 @@ class BlockKrylovSolver:
                 f"{its} iterations; raise maxiter or use the direct solver")
         return x
 
-    def _krylov(self, K, r: np.ndarray, rtol: float, M) -> tuple[np.ndarray, int, float]:
+    def _krylov(self, K, r: np.ndarray, rtol: float, M,
+                x0: np.ndarray | None = None) -> tuple[np.ndarray, int, float]:
         """Restarted Krylov on the true defect until the true residual meets ``rtol``."""
         r = np.asarray(r, dtype=float)
         norm_r = float(np.linalg.norm(r))
@@ -558,6 +574,15 @@ class BlockKrylovSolver:
         inner_rtol = rtol
         res = 1.0
         defect = r
+        if x0 is not None and x0.shape == r.shape:
+            defect = r - K @ x0
+            res = float(np.linalg.norm(defect)) / norm_r
+            if res < 1.0:  # a guess worse than zero is dropped
+                x = np.array(x0, dtype=float)
+                if res <= rtol:
+                    return x, 0, res
+            else:
+                defect, res = r, 1.0
         while its < self.maxiter:
             target = inner_rtol * norm_r / np.linalg.norm(defect)
             if self.method == "minres":

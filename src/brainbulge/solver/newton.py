@@ -140,6 +140,7 @@ class NewtonSolver:
         self.inexact = self.opt.linear_solver == "krylov"
         self.eta = self.eta_cap = ETA_MAX
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
+        self.last_linear_solution: np.ndarray | None = None
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
@@ -185,7 +186,7 @@ class NewtonSolver:
         return K[self.free][:, self.free]
 
     def newton_direction(
-        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None
+        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None, guess: np.ndarray | None = None
     ) -> tuple[ngs.BaseVector, list[np.ndarray]]:
         """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``.
 
@@ -195,6 +196,10 @@ class NewtonSolver:
         ``[[K, -B_A^T], [-B_A, 0]] [dx, dlam_A] = [R + B_I^T lam_I, -A g_A]``, with the
         constraints eliminated at their nodes (:class:`NodalElimination`) when each acts on
         one node, else in augmented form (:func:`_augmented`).
+
+        ``guess``: the linear system's solution of a retry at the same state (another
+        active set, or a tighter tolerance), an initial guess for an iterative solver; the
+        system's solution is kept in ``self.last_linear_solution`` for that purpose.
         """
         if K is None:  # a retry at the same state (new active set) reuses the tangent
             K = self.tangent(x)
@@ -239,7 +244,8 @@ class NewtonSolver:
                 b = np.concatenate([b, c])
         t0 = time.perf_counter()
         if self.inexact:
-            sol = self.linear.solve(K, b, rtol=self.eta)
+            sol = self.linear.solve(K, b, rtol=self.eta, x0=guess)
+            self.last_linear_solution = sol
         else:
             sol = self.linear.solve(K, b)
         self.t_solve += time.perf_counter() - t0
@@ -276,6 +282,7 @@ class NewtonSolver:
             if not np.isfinite(norm) or it == self.opt.max_iterations:
                 return False, it, norm
             K_x = None  # the tangent at x0, shared by the retries of this iteration
+            self.last_linear_solution = None  # and the last direction, their Krylov guess
             x0 = x.CreateVector()
             x0.data = x
             lam0 = [pc.lam.copy() for pc in pcs]
@@ -284,7 +291,7 @@ class NewtonSolver:
                 try:
                     if K_x is None:
                         K_x = self.tangent(x)
-                    dx, dlams = self.newton_direction(x, K_x)
+                    dx, dlams = self.newton_direction(x, K_x, self.last_linear_solution)
                 except ConvergenceError:
                     if not self.inexact or self.eta <= ETA_MIN:
                         return False, it, norm
