@@ -232,6 +232,10 @@ class NewtonSolver:
             if nB and NodalElimination.applies(B):
                 elimination = NodalElimination(K, B, c, self.is_u_free)
                 K, b = elimination.system(b)
+                if guess is not None and len(guess) == len(b):
+                    # y has no normal part at the constrained nodes (N^T y = 0); a guess
+                    # from another active set does, which the d N N^T rows magnify
+                    guess = elimination.project(guess)
             else:
                 if nB:
                     K, b = _augmented(K, b, B, c, self.is_u_free)
