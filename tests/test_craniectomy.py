@@ -218,3 +218,34 @@ def test_study_resume_refuses_a_mesh_built_for_other_options(tmp_path) -> None:
     assert prepare_study_mesh(tmp_path, common) == mesh_dir / "brain.npz"
     with pytest.raises(InputError, match="same mesh options"):
         prepare_study_mesh(tmp_path, {**common, "tets": 100000})
+
+
+def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_path,
+                                                         monkeypatch) -> None:
+    """A run stopped in its second load step leaves ``restart.npz``; run again into the same
+    folder it solves only the missing step, then removes the file."""
+    from brainbulge.solver.newton import NewtonSolver
+
+    class Killed(Exception):
+        pass
+
+    loads = []
+    newton = NewtonSolver.newton
+
+    def logged(self, x):
+        loads.append(self.form.load.Get())
+        if kill and self.form.load.Get() > 0.6:
+            raise Killed
+        return newton(self, x)
+
+    monkeypatch.setattr(NewtonSolver, "newton", logged)
+    config = {"flap": "frontal", "swell": "left", "steps": 2}
+    kill = True
+    with pytest.raises(Killed):
+        run_brain(config, tmp_path, brain_mesh=symmetric_brain)
+    assert (tmp_path / "restart.npz").is_file()
+    kill, loads[:] = False, []
+    s = run_brain(config, tmp_path, brain_mesh=symmetric_brain)
+    assert s["converged"] and s["load_steps"] == 2
+    assert loads[0] == pytest.approx(1.0)  # load 0.5 came from the file
+    assert not (tmp_path / "restart.npz").exists()

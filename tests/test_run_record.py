@@ -73,6 +73,15 @@ def test_resume_needs_a_study(tmp_path: Path) -> None:
         prepare_output_dir(tmp_path, overwrite=True, resume=True)
 
 
+def test_a_stopped_3d_run_folder_can_be_resumed(tmp_path: Path) -> None:
+    (tmp_path / "summary.json").write_text("{}")
+    with pytest.raises(InputError, match="no study.json or restart.npz"):
+        prepare_output_dir(tmp_path, overwrite=False, resume=True)
+    (tmp_path / "restart.npz").write_bytes(b"state")
+    assert prepare_output_dir(tmp_path, overwrite=False, resume=True) == tmp_path
+    assert (tmp_path / "restart.npz").read_bytes() == b"state"  # kept
+
+
 def test_prepare_refuses_a_file(tmp_path: Path) -> None:
     target = tmp_path / "f"
     target.write_text("")

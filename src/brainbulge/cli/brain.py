@@ -3,13 +3,15 @@
 White matter swells (``Js: 1 -> --swelling``) in one hemisphere or both; the brain slides
 without friction on the rigid skull and bulges through the flap. The mesh is built from the
 ICBM152 template (or ``--labels``) with about ``--tets`` tetrahedra, or read from ``--mesh``
-(a ``brain.npz`` of ``brainbulge mesh``).
+(a ``brain.npz`` of ``brainbulge mesh``). The same command run again on the ``--out`` of a
+run that was stopped (killed, out of time) resumes from its ``restart.npz``.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, positive_float, start_run
@@ -89,7 +91,9 @@ def run_case(args: argparse.Namespace, case: Any) -> int:
     from brainbulge.studies.craniectomy import run_brain
 
     config = {"command": "brain", "brain": _plain(dataclasses.asdict(case))}
-    out = start_run(args, config)
+    # a folder with a restart file (a run stopped mid-way) is resumed, unless --overwrite
+    resume = (Path(args.out) / "restart.npz").is_file() and not args.overwrite
+    out = start_run(args, config, resume=resume)
     s = run_brain(case, out, progress=True)
     finish_run(out)
     print(

@@ -125,8 +125,9 @@ def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Pat
       ``run.toml``, ``status.json`` or ``study.json``); its contents are deleted so stale
       results cannot mix with new ones. A non-empty folder that is *not* a brainbulge output
       is never deleted, even with ``overwrite``.
-    * ``resume``: the folder holds a ``study.json`` (a resumable study); it is reused as is,
-      finished scenarios are kept.
+    * ``resume``: the folder holds a ``study.json`` (a resumable study) or a ``restart.npz``
+      (a 3D run stopped mid-way); it is reused as is, finished scenarios and the restart
+      state are kept.
 
     Raises `InputError` with a one-line message otherwise.
     """
@@ -137,10 +138,10 @@ def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Pat
         raise InputError(f"output folder {path} exists and is a file; choose another --out")
     if path.is_dir() and any(path.iterdir()):
         if resume:
-            if not (path / "study.json").is_file():
+            if not any((path / name).is_file() for name in ("study.json", "restart.npz")):
                 raise InputError(
-                    f"cannot resume: output folder {path} is not empty and holds no study.json;"
-                    " choose another --out"
+                    f"cannot resume: output folder {path} is not empty and holds no study.json"
+                    " or restart.npz; choose another --out"
                 )
             return path
         if not overwrite:

@@ -7,13 +7,20 @@ residual norm. A step that fails (divergence, non-finite values from inverted el
 many iterations) is cut in half and retried from the last converged state; the solve stops with
 a clear message when the step would fall below ``min_step``. Contact multipliers are
 augmented (Uzawa) after each converged step until the penetration is below tolerance.
+
+With ``SolverOptions.checkpoint`` the state after every accepted load step is written to an
+``.npz`` restart file; a solve that finds a file of the same problem there (``key`` and the
+number of DOFs) resumes from it instead of starting at ``t = 0`` (as Abaqus' restart): a
+long 3D run that is stopped loses at most one load step.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import ngsolve as ngs
 import numpy as np
@@ -42,6 +49,10 @@ class SolverOptions:
         max_augmentations: Uzawa updates per load step.
         linear_solver: "pardiso", "scipy" or "krylov" (GMRES with AMG blocks, MINI only).
         progress: show a progress bar over the load.
+        checkpoint: restart file written after each accepted load step and read at the
+            start when it holds the same problem (see the module docstring).
+        checkpoint_key: identifies the problem in the restart file (e.g. the inputs as
+            JSON); a file with another key is ignored and overwritten.
     """
 
     steps: int = 5
@@ -53,6 +64,8 @@ class SolverOptions:
     max_augmentations: int = 10
     linear_solver: str = "pardiso"
     progress: bool = False
+    checkpoint: str | Path | None = None
+    checkpoint_key: str = ""
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
@@ -463,7 +476,13 @@ class NewtonSolver:
         last_increment: ngs.BaseVector | None = None
         last_dt = 0.0
         pen_tol = opt.penetration_tol * self.length
+        if opt.checkpoint is not None:
+            resumed = self._read_checkpoint(Path(opt.checkpoint), x, sol)
+            if resumed is not None:
+                t, dt, last_increment, last_dt = resumed
+                x_prev.data = x
         bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
+        bar.update(round(100 * t))
         try:
             while t < 1 - 1e-12:
                 dt = min(dt, 1 - t, opt.max_step)
@@ -508,6 +527,9 @@ class NewtonSolver:
                 log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, norm)
                 if its <= 4:
                     dt *= 1.5
+                if opt.checkpoint is not None:
+                    self._write_checkpoint(Path(opt.checkpoint), x, t, dt, last_increment,
+                                           last_dt, sol)
             else:
                 sol.converged = True
         finally:
@@ -521,6 +543,53 @@ class NewtonSolver:
         stats = getattr(self.linear, "stats", None)
         sol.linear_iterations = int(sum(stats.iterations)) if stats is not None else 0
         return sol
+
+
+    # --- restart file ----------------------------------------------------------------------
+    def _write_checkpoint(self, path: Path, x: ngs.BaseVector, t: float, dt: float,
+                          increment: ngs.BaseVector, last_dt: float, sol: Solution) -> None:
+        """The converged state at load ``t`` and what the next step needs (atomic write)."""
+        form = self.form
+        steps = np.array([[s.load, s.newton_iterations, s.augmentations, s.residual,
+                           s.max_penetration] for s in sol.steps])
+        tmp = path.with_name(path.name + ".tmp.npz")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(tmp, key=self.opt.checkpoint_key, ndof=len(x), t=t, dt=dt, last_dt=last_dt,
+                 x=x.FV().NumPy(), increment=increment.FV().NumPy(), r=form.r.Get(),
+                 steps=steps, rejected=sol.rejected_steps,
+                 **{f"lam{i}": v for i, v in enumerate(form.multiplier_state())})
+        os.replace(tmp, path)
+
+    def _read_checkpoint(
+        self, path: Path, x: ngs.BaseVector, sol: Solution
+    ) -> tuple[float, float, ngs.BaseVector, float] | None:
+        """Restore the state of a restart file of this problem; ``None`` if there is none."""
+        if not path.is_file():
+            return None
+        try:
+            with np.load(path) as f:
+                data = {k: f[k] for k in f.files}
+        except (OSError, ValueError) as exc:
+            log.warning("restart file %s unreadable (%s): starting from Js = 1", path, exc)
+            return None
+        n_lam = len(self.form.multiplier_state())
+        if (str(data["key"]) != self.opt.checkpoint_key or int(data["ndof"]) != len(x)
+                or any(f"lam{i}" not in data for i in range(n_lam))):
+            log.info("restart file %s is of another problem: starting from Js = 1", path)
+            return None
+        form = self.form
+        t = float(data["t"])
+        x.FV().NumPy()[:] = data["x"]
+        increment = x.CreateVector()
+        increment.FV().NumPy()[:] = data["increment"]
+        form.r.Set(float(data["r"]))
+        form.restore_multipliers([data[f"lam{i}"] for i in range(n_lam)])
+        form.set_load(t)
+        sol.steps = [StepRecord(float(a), int(b), int(c), float(d), float(e))
+                     for a, b, c, d, e in data["steps"].reshape(-1, 5)]
+        sol.rejected_steps = int(data["rejected"])
+        log.info("resuming from %s at load %.4f", path, t)
+        return t, float(data["dt"]), increment, float(data["last_dt"])
 
 
 def pc_free(pc, solver: NewtonSolver) -> np.ndarray:

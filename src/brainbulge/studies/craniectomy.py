@@ -4,7 +4,10 @@
 (ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``
 and ``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
 ranges). A run that stops early keeps the last converged state on disk, marked
-``"converged": false``, and raises :class:`~brainbulge.errors.ConvergenceError`.
+``"converged": false``, and raises :class:`~brainbulge.errors.ConvergenceError`. While it
+runs, ``restart.npz`` holds the state after the last accepted load step: the same scenario
+run again into the same directory (after a kill, or the end of a batch job's time) resumes
+from there; the file is removed when the run completes.
 
 Clinical metrics (lengths mm, volumes ml, pressures kPa and mmHg):
 
@@ -24,6 +27,7 @@ stress is singular; ``raw_*`` over all parenchyma, ``csf_*`` over the CSF filler
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -90,11 +94,19 @@ def run_brain(
     bm = brain_mesh if brain_mesh is not None else brain_mesh_for(case)
     problem = brain_problem(bm, case)
     form = MixedForm(problem, element=case.element, compile_energy=case.compile)
+    restart = out_dir / "restart.npz"
+    inputs = {k: v for k, v in dataclasses.asdict(case).items() if k != "steps"}
+    mesh_hash = hashlib.sha1(np.ascontiguousarray(bm.nodes_mm).tobytes()
+                             + np.ascontiguousarray(bm.tets).tobytes()).hexdigest()
+    key = json.dumps([inputs, mesh_hash], sort_keys=True, default=str)
     solver = NewtonSolver(
         form,
-        SolverOptions(steps=case.steps, progress=progress, linear_solver=case.linear_solver),
+        SolverOptions(steps=case.steps, progress=progress, linear_solver=case.linear_solver,
+                      checkpoint=restart, checkpoint_key=key),
     )
     sol = solver.solve()
+    if sol.converged:
+        restart.unlink(missing_ok=True)
     fibres = _fibres(case, bm)
     summary = brain_summary(case, bm, form, solver, sol, fibres)
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
