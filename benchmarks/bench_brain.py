@@ -3,7 +3,8 @@
 Run ``python benchmarks/bench_brain.py [--sizes 30000 100000 400000] [--steps 2]
 [--variants baseline direct krylov] [--edge-radius MM]``. Each (size, variant) runs in a
 fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from
-``--cache DIR``), then solved.
+``--cache DIR``), then solved. A run stopped mid-way (killed, out of time) continues from its
+restart file with ``--resume``; without it every run starts at Js = 1.
 
 Variants (the same mesh, model and outputs):
 
@@ -38,7 +39,7 @@ VARIANTS = {
 
 
 def one(target_tets: int, steps: int, cache: Path, variant: str,
-        edge_radius_mm: float = EDGE_RADIUS_MM) -> dict:
+        edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False) -> dict:
     import logging
 
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
@@ -59,6 +60,15 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         save_brain_mesh(bm, path.parent, figures=False)
     t_mesh = time.perf_counter() - t0
     out = cache / f"run_{target_tets}_{variant}"
+    restart = out / "restart.npz"  # left by a run that was stopped
+    resumed_at = 0.0
+    if restart.is_file() and resume:
+        import numpy as np
+
+        with np.load(restart) as f:
+            resumed_at = float(f["t"])
+    else:  # a timing from Js = 1
+        restart.unlink(missing_ok=True)
     t1 = time.perf_counter()
     s = run_brain({"flap": "left", "swell": "both", "steps": steps,
                    "edge_radius_mm": edge_radius_mm, **VARIANTS[variant]},
@@ -72,6 +82,7 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "shift_mm": s["midline_shift_mm"], "bulge_ml": s["bulge_volume_ml"],
         "penetration_mm": s["max_penetration_mm"], "variant": variant,
+        "resumed_at": resumed_at,
     }
 
 
@@ -98,10 +109,14 @@ def main() -> int:
     parser.add_argument("--edge-radius", type=float, default=EDGE_RADIUS_MM,
                         help="rounded cut edge of the skull at the flap [mm] (the brain "
                              "command's --skull-edge-radius)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue a stopped run from its restart file (CACHE/run_N_VARIANT/"
+                             "restart.npz); the times then cover only this part")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius)
+        r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius,
+                args.resume)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
@@ -109,7 +124,7 @@ def main() -> int:
     for n, variant in ((n, v) for n in args.sizes for v in args.variants):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
                "--cache", str(args.cache), "--variants", variant,
-               "--edge-radius", str(args.edge_radius)]
+               "--edge-radius", str(args.edge_radius)] + (["--resume"] if args.resume else [])
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:
@@ -118,6 +133,9 @@ def main() -> int:
             continue
         results[n, variant] = json.loads(lines[-1][7:])
         print(row(n, results[n, variant]), flush=True)
+        if results[n, variant].get("resumed_at"):
+            print(f"{'':>8} {variant:>8}: resumed at load {results[n, variant]['resumed_at']:.3f}"
+                  "; the times above are of this part only", flush=True)
     for n in args.sizes:
         base = results.get((n, "baseline"))
         if base is None:
