@@ -65,6 +65,13 @@ def add_parser(sub: Any) -> None:
         default=0.05,
         help="rounding radius of the skull's cut edge [units of R]",
     )
+    p.add_argument(
+        "--rezone",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="remesh through the deformation when the deformed mesh degenerates or a load "
+        "step fails (docs/design.md)",
+    )
     add_output_options(p, "hemidisk-out")
     p.set_defaults(func=run_command)
 
@@ -88,6 +95,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "material": args.material,
         "edge_exclusion": args.edge_exclusion,
         "skull_edge_radius": args.skull_edge_radius,
+        "rezone": args.rezone,
     }
 
 

@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import ngsolve as ngs
+import numpy as np
 from netgen.meshing import MeshingParameters
 from netgen.occ import Circle, Glue, MoveTo, OCCGeometry
 
@@ -82,6 +83,28 @@ class Hemidisk:
             pts += [self._on_arc(a) for a in self.sector_angles_deg]
             pts.append((0.0, 0.0))
         return pts
+
+    def project(self, label: str, X: np.ndarray) -> np.ndarray:
+        """Closest points (n, 2) of the curve named ``label`` to ``X`` (n, 2): the arc
+        (``skull``, ``opening``), the ``base``, the swelling disk's ``interface``, or for
+        other lines between regions (the sector edges) the nearest radial line."""
+        X = np.array(X, dtype=float)
+        if label in ("skull", "opening"):
+            return self.R * X / np.linalg.norm(X, axis=1, keepdims=True)
+        if label == "base":
+            X[:, 1] = 0.0
+            return X
+        if label == "interface" and self.disk is not None:
+            c = np.array(self.disk[:2])
+            d = X - c
+            return c + self.disk[2] * d / np.linalg.norm(d, axis=1, keepdims=True)
+        if self.sector_angles_deg is None:
+            return X
+        angles = np.radians(np.array(self.sector_angles_deg))
+        dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (2, 2)
+        theta = np.arctan2(X[:, 1], X[:, 0])
+        k = np.argmin(np.abs(theta[:, None] - angles[None]), axis=1)
+        return (X * dirs[k]).sum(1, keepdims=True) * dirs[k]
 
     def _on_arc(self, deg: float) -> tuple[float, float]:
         t = math.radians(deg)

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import ngsolve as ngs
+
 from brainbulge.errors import InputError
 from brainbulge.geometry.hemidisk import Hemidisk
 from brainbulge.geometry.skull2d import RigidSkull2D
@@ -54,6 +56,7 @@ class HemidiskCase:
     skull_thickness: float = 0.2
     skull_edge_radius: float = 0.05
     edge_exclusion: float = 0.05
+    rezone: bool = True
     name: str = "hemidisk"
     extra: dict = field(default_factory=dict)
 
@@ -88,6 +91,13 @@ class HemidiskCase:
         )
 
     @property
+    def corner_h(self) -> float:
+        """Element size at the singular points [length] (default a fifth of the mesh size)."""
+        if self.corner_mesh_size is not None:
+            return self.corner_mesh_size * self.R
+        return self.mesh_size * self.R / 5
+
+    @property
     def skull(self) -> RigidSkull2D:
         return RigidSkull2D(
             R=self.R,
@@ -104,11 +114,13 @@ class HemidiskCase:
         return mats[self.tissue]
 
 
-def hemidisk_problem(case: HemidiskCase) -> Problem:
-    """Mesh the hemidisk and set materials, swelling and the contact condition."""
+def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Problem:
+    """Mesh the hemidisk (or take ``mesh``, e.g. a rezoned one) and set materials, swelling
+    and the contact condition."""
     geo = case.geometry
     skull = case.skull
-    mesh = geo.mesh(case.mesh_size * case.R, case.corner_mesh_size)
+    if mesh is None:
+        mesh = geo.mesh(case.mesh_size * case.R, case.corner_h)
     m = case.tissue_material()
     materials = {r: m for r in set(mesh.GetMaterials())}
     swelling = {"swelling": case.swelling}

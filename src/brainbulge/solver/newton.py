@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +54,12 @@ class SolverOptions:
             start when it holds the same problem (see the module docstring).
         checkpoint_key: identifies the problem in the restart file (e.g. the inputs as
             JSON); a file with another key is ignored and overwritten.
+        start_load: load factor of the form's current state, where the ramp starts
+            (a state carried over from another mesh by rezoning).
+        stop_when: asked after each accepted load step below full load; ``True`` stops the
+            ramp there (the state is kept, ``converged`` is false, ``stopped_early`` true).
+        stop_on_failure: asked with the last converged load when a load step fails,
+            before it is cut; ``True`` stops the ramp there as ``stop_when`` does.
     """
 
     steps: int = 5
@@ -66,12 +73,17 @@ class SolverOptions:
     progress: bool = False
     checkpoint: str | Path | None = None
     checkpoint_key: str = ""
+    start_load: float = 0.0
+    stop_when: Callable[[], bool] | None = None
+    stop_on_failure: Callable[[float], bool] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
         if not (0 < self.min_step <= 1):
             raise InputError(f"min_step = {self.min_step!r} must lie in (0, 1]")
+        if not (0 <= self.start_load < 1):
+            raise InputError(f"start_load = {self.start_load!r} must lie in [0, 1)")
 
 
 @dataclass
@@ -99,6 +111,8 @@ class Solution:
     assembly_time_s: float = 0.0
     solve_time_s: float = 0.0
     linear_iterations: int = 0  # Krylov iterations in all (0 with a direct solver)
+    stopped_early: bool = False  # by ``SolverOptions.stop_when``, not by a failure
+    rezones: int = 0  # mesh exchanges (see :mod:`brainbulge.solver.rezoning`)
 
     @property
     def newton_iterations(self) -> int:
@@ -470,7 +484,7 @@ class NewtonSolver:
         start = time.perf_counter()
         x = form.gfu.vec
         sol = Solution(form=form, load=0.0, converged=False)
-        t, dt = 0.0, 1.0 / opt.steps
+        t, dt = opt.start_load, 1.0 / opt.steps
         x_prev = x.CreateVector()
         x_prev.data = x
         last_increment: ngs.BaseVector | None = None
@@ -506,6 +520,10 @@ class NewtonSolver:
                     sol.rejected_steps += 1
                     x.data = x_prev
                     form.restore_multipliers(lam_saved)
+                    if opt.stop_on_failure is not None and opt.stop_on_failure(t):
+                        sol.stopped_early = True
+                        sol.message = f"stopped at load {t:.4f} (stop_on_failure)"
+                        break
                     log.info("  load %.4f: not converged (|R| = %.2e), cutting step", t + dt, norm)
                     dt *= 0.5
                     if dt < opt.min_step:
@@ -530,6 +548,10 @@ class NewtonSolver:
                 if opt.checkpoint is not None:
                     self._write_checkpoint(Path(opt.checkpoint), x, t, dt, last_increment,
                                            last_dt, sol)
+                if opt.stop_when is not None and t < 1 - 1e-12 and opt.stop_when():
+                    sol.stopped_early = True
+                    sol.message = f"stopped at load {t:.4f} (stop_when)"
+                    break
             else:
                 sol.converged = True
         finally:

@@ -33,6 +33,7 @@ from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_si
 from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.summary import solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.rezoning import Rezoning, solve_with_rezoning
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
 SECTOR_BETAS = (30.0, 60.0, 90.0, 120.0)
@@ -60,10 +61,16 @@ def run_hemidisk(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     problem = hemidisk_problem(case)
-    form = MixedForm(problem, element=case.element)
-    solver = NewtonSolver(form, SolverOptions(steps=case.steps, progress=progress))
-    sol = solver.solve()
     geo = case.geometry
+    options = SolverOptions(steps=case.steps, progress=progress)
+    if case.rezone:
+        rezoning = Rezoning(lambda mesh: hemidisk_problem(case, mesh), geo.project,
+                            case.mesh_size * case.R, case.corner_h, geo.singular_points())
+        sol, solver = solve_with_rezoning(problem, rezoning, case.element, options)
+    else:
+        solver = NewtonSolver(MixedForm(problem, element=case.element), options)
+        sol = solver.solve()
+    form = sol.form
     centre = np.zeros(2)
     summary: dict[str, Any] = {
         "case": case.name,
@@ -72,6 +79,7 @@ def run_hemidisk(
             sol, solver, centre, geo.singular_points(), case.edge_exclusion * case.R
         ),
     }
+    summary["rezones"] = sol.rezones
     summary["swelling_area_ratio_expected"] = _expected_area_ratio(case)
     vf = vertex_fields(form, centre)
     add_contact_fields(vf, form)

@@ -1,0 +1,185 @@
+"""Load stepping with rezoning (2D): the mesh is exchanged when its image degenerates.
+
+:class:`NewtonSolver` ramps the load on one mesh. Here the ramp stops after an accepted load
+step when the deformed triangles' smallest shape quality ``q = 4 sqrt(3) A / sum l^2`` falls
+below ``q_min`` (or when a step fails on a mesh that has deformed since the last rezoning),
+the deformed domain is meshed afresh and pulled back to the reference configuration
+(:func:`brainbulge.geometry.rezone.rezone`), the state ``(u, p, lambda)`` is carried over,
+and the ramp goes on from the same load. The material is hyperelastic, so the converged
+state at a load does not depend on the mesh history: rezoning changes the discretisation,
+not the problem.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable, Sequence
+
+import ngsolve as ngs
+import numpy as np
+from scipy.spatial import cKDTree
+
+from brainbulge.geometry.rezone import (
+    Projector,
+    Rezoned,
+    deformed_quality,
+    rezone,
+    vertex_values,
+)
+from brainbulge.model.problem import Problem
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
+from brainbulge.solver.point_contact import _edge_bubble_midpoint_value
+
+log = logging.getLogger("brainbulge")
+
+#: rezone when the smallest deformed triangle quality falls below this [-]
+Q_MIN = 0.2
+
+
+@dataclasses.dataclass
+class Rezoning:
+    """How to remesh: ``problem_on(mesh)`` rebuilds the problem on a new reference mesh,
+    ``project(label, X)`` moves points onto the reference curve ``label``; sizes [length]
+    and the reference singular points ``corners`` (refined to ``h_corner``)."""
+
+    problem_on: Callable[[ngs.Mesh], Problem]
+    project: Projector
+    h: float
+    h_corner: float
+    corners: Sequence[tuple[float, float]]
+    q_min: float = Q_MIN
+    max_rezones: int = 50
+
+
+def solve_with_rezoning(
+    problem: Problem,
+    rezoning: Rezoning,
+    element: str = "taylor-hood",
+    options: SolverOptions | None = None,
+) -> tuple[Solution, NewtonSolver]:
+    """Ramp the swelling to full load, rezoning as needed; the last solver holds the final
+    mesh and state. ``Solution.rezones`` counts the mesh exchanges."""
+    options = options or SolverOptions()
+    start = time.perf_counter()
+    form = MixedForm(problem, element=element)
+    total: Solution | None = None
+    t, rezones = options.start_load, 0
+    while True:
+        def degenerate(f: MixedForm = form) -> bool:
+            return float(deformed_quality(f.mesh, f.u).min()) < rezoning.q_min
+
+        def moved(t_now: float, t_mesh: float = t) -> bool:
+            return t_now > t_mesh + 1e-9  # a failure on a mesh that has deformed since
+
+        solver = NewtonSolver(form, dataclasses.replace(
+            options, start_load=t, stop_when=degenerate, stop_on_failure=moved))
+        if rezones:  # equilibrate the carried-over state on the new mesh first
+            r0 = solver.scaled_norm(solver.residual(form.gfu.vec))
+            ok, its, norm = solver.newton(form.gfu.vec)
+            log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
+                     t, r0, norm, its)
+        sol = solver.solve()
+        total = sol if total is None else _merged(total, sol)
+        if sol.converged or rezones >= rezoning.max_rezones:
+            break
+        if not sol.stopped_early:
+            break  # failed on a fresh mesh: rezoning cannot help
+        q = float(deformed_quality(form.mesh, form.u).min())
+        log.info("  rezoning at load %.4f (smallest deformed quality %.3f)", sol.load, q)
+        rz = rezone(form.mesh, form.u, rezoning.project, rezoning.h, rezoning.h_corner,
+                    rezoning.corners)
+        new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
+        transfer_state(form, new, rz)
+        form, t = new, sol.load
+        rezones += 1
+    total.form = form
+    total.converged = sol.converged
+    total.stopped_early = False
+    total.rezones = rezones
+    total.wall_time_s = time.perf_counter() - start
+    if not sol.converged and not sol.message:
+        total.message = f"stopped at load {sol.load:.4f}"
+    return total, solver
+
+
+def _straighten_folded(form: MixedForm) -> None:
+    """Zero the edge bubbles of elements where ``det F <= 0`` somewhere: the old map
+    interpolated over a new element may fold it, the straight deformed triangle (netgen's
+    own, positively oriented) never does."""
+    mesh = form.mesh
+    V = form.fes.components[0]
+    uvec = form.u.vec.FV().NumPy()
+    folded_cf = ngs.IfPos(1e-6 - ngs.Det(form.F()), 1.0, 0.0)
+    for _ in range(3):
+        folded = np.asarray(ngs.Integrate(folded_cf, mesh, order=4, element_wise=True))
+        bad = np.flatnonzero(folded > 0)
+        if not len(bad):
+            return
+        log.debug("  rezoning: straightening %d folded elements", len(bad))
+        for k in bad:
+            for e in mesh[ngs.ElementId(ngs.VOL, int(k))].edges:
+                uvec[list(V.GetDofNrs(ngs.NodeId(ngs.EDGE, e.nr)))] = 0.0
+
+
+def _merged(a: Solution, b: Solution) -> Solution:
+    """``b`` continuing ``a`` (steps, counts and times added)."""
+    b.steps = a.steps + b.steps
+    b.rejected_steps += a.rejected_steps
+    b.assembly_time_s += a.assembly_time_s
+    b.solve_time_s += a.solve_time_s
+    b.linear_iterations += a.linear_iterations
+    return b
+
+
+def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
+    """Carry ``u``, ``p`` and the point-contact pressures from ``old`` to ``new``'s mesh:
+    ``u`` at vertices from the pull-back, at P2 edge midpoints evaluated on the old mesh,
+    ``p`` per pressure zone at the vertices (evaluated just inside each zone's elements), and
+    each contact point's pressure from the nearest old contact point (deformed positions)."""
+    mesh = new.mesh
+    V = new.fes.components[0]
+    uvec = new.u.vec.FV().NumPy()
+    uvec[:] = 0
+    for v in range(mesh.nv):
+        for i, dof in enumerate(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v))[: mesh.dim]):
+            uvec[dof] = rz.u_vertices[v, i]
+    X = np.array([p.point for p in mesh.vertices])[:, : mesh.dim]
+    if V.globalorder >= 2:
+        beta = _edge_bubble_midpoint_value(mesh, V)
+        ends = np.array([[v.nr for v in e.vertices] for e in mesh.edges])
+        mid = 0.5 * (X[ends[:, 0]] + X[ends[:, 1]])
+        inward = mid.copy()  # the centroid of a triangle at each edge
+        for el in mesh.Elements(ngs.VOL):
+            c = X[[v.nr for v in el.vertices]].mean(axis=0)
+            for e in el.edges:
+                inward[e.nr] = c
+        u_mid = vertex_values(old.mesh, old.u, mid, inward=inward)
+        bubble = (u_mid - 0.5 * (rz.u_vertices[ends[:, 0]] + rz.u_vertices[ends[:, 1]])) / beta
+        bubble[~np.isfinite(bubble)] = 0.0
+        for e in range(len(ends)):
+            for i, dof in enumerate(V.GetDofNrs(ngs.NodeId(ngs.EDGE, e))[: mesh.dim]):
+                uvec[dof] = bubble[e, i]
+        _straighten_folded(new)
+    for k, zone in enumerate(new.pressure_zones):
+        Q = new.fes.components[1 + k]
+        old_p = old.gfu.components[1 + k]
+        pvec = new.gfu.components[1 + k].vec.FV().NumPy()
+        in_zone = mesh.Materials(zone).Mask()
+        tris = np.array([[v.nr for v in el.vertices] for el in mesh.Elements(ngs.VOL)
+                         if in_zone[el.index]])
+        inner = X[tris] + 1e-3 * (X[tris].mean(axis=1, keepdims=True) - X[tris])
+        vals = vertex_values(old.mesh, old_p, inner.reshape(-1, mesh.dim))[:, 0]
+        for v, val in zip(tris.ravel(), vals, strict=True):
+            if np.isfinite(val):
+                pvec[Q.GetDofNrs(ngs.NodeId(ngs.VERTEX, int(v)))[0]] = val
+    new.set_load(old.load.Get())
+    x = new.gfu.vec.FV().NumPy()
+    for pc_old, pc_new in zip(old.point_contacts, new.point_contacts, strict=True):
+        pc_old.update(old.gfu.vec.FV().NumPy())
+        pc_new.update(x)
+        _, idx = cKDTree(pc_old.x).query(pc_new.x)
+        pc_new.lam = pc_old.lam[idx].copy()
+
