@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import ngsolve as ngs
 import numpy as np
-from matplotlib.tri import Triangulation
 from netgen.geom2d import SplineGeometry
 from netgen.meshing import MeshingParameters
 from scipy.spatial import cKDTree
@@ -305,16 +304,28 @@ def _pull_back(mesh: ngs.Mesh, u: ngs.CoefficientFunction, top: _Topology, x: np
                x_new: np.ndarray, iterations: int = 8) -> np.ndarray:
     """``X`` with ``X + u(X) = x_new``: start from the deformed straight triangles'
     barycentric map, then Newton with ``F = I + grad u``."""
-    tri = Triangulation(x[:, 0], x[:, 1], top.tris)
-    found = tri.get_trifinder()(x_new[:, 0], x_new[:, 1])
     X = top.X[cKDTree(x).query(x_new)[1]]  # outside every straight triangle: nearest vertex
-    inside = found >= 0
-    t = top.tris[found[inside]]
-    a, b, c = x[t[:, 0]], x[t[:, 1]], x[t[:, 2]]
-    T = np.stack([b - a, c - a], axis=2)
-    lam = np.linalg.solve(T, (x_new[inside] - a)[..., None])[..., 0]
-    A, B, C = top.X[t[:, 0]], top.X[t[:, 1]], top.X[t[:, 2]]
-    X[inside] = A + lam[:, :1] * (B - A) + lam[:, 1:] * (C - A)
+    # point location among the deformed straight triangles nearest by centroid (written by
+    # hand: matplotlib's trifinder refuses a triangulation with one flipped triangle)
+    k = min(12, len(top.tris))
+    _, cand = cKDTree(x[top.tris].mean(axis=1)).query(x_new, k=k)
+    cand = cand.reshape(len(x_new), k)
+    t = top.tris[cand]  # (n, k, 3)
+    a, b, c = x[t[..., 0]], x[t[..., 1]], x[t[..., 2]]
+    T = np.stack([b - a, c - a], axis=-1)  # (n, k, 2, 2)
+    det = T[..., 0, 0] * T[..., 1, 1] - T[..., 0, 1] * T[..., 1, 0]
+    rhs = x_new[:, None, :] - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        l1 = (rhs[..., 0] * T[..., 1, 1] - rhs[..., 1] * T[..., 0, 1]) / det
+        l2 = (T[..., 0, 0] * rhs[..., 1] - T[..., 1, 0] * rhs[..., 0]) / det
+    inside_k = (det > 0) & (l1 >= -1e-9) & (l2 >= -1e-9) & (l1 + l2 <= 1 + 1e-9)
+    hit = inside_k.any(axis=1)
+    j = np.argmax(inside_k, axis=1)
+    rows = np.flatnonzero(hit)
+    tt = t[rows, j[rows]]
+    lam1, lam2 = l1[rows, j[rows]][:, None], l2[rows, j[rows]][:, None]
+    A, B, C = top.X[tt[:, 0]], top.X[tt[:, 1]], top.X[tt[:, 2]]
+    X[rows] = A + lam1 * (B - A) + lam2 * (C - A)
     grad = ngs.Grad(u)
     scale = max(1.0, float(np.abs(x).max()))
     for _ in range(iterations):

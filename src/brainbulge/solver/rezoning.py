@@ -19,8 +19,10 @@ from collections.abc import Callable, Sequence
 
 import ngsolve as ngs
 import numpy as np
+from netgen.libngpy._meshing import NgException
 from scipy.spatial import cKDTree
 
+from brainbulge.errors import ConvergenceError
 from brainbulge.geometry.rezone import (
     Projector,
     Rezoned,
@@ -67,6 +69,7 @@ def solve_with_rezoning(
     form = MixedForm(problem, element=element)
     total: Solution | None = None
     t, rezones = options.start_load, 0
+    solver = NewtonSolver(form, options)
     while True:
         def degenerate(f: MixedForm = form) -> bool:
             return float(deformed_quality(f.mesh, f.u).min()) < rezoning.q_min
@@ -74,13 +77,8 @@ def solve_with_rezoning(
         def moved(t_now: float, t_mesh: float = t) -> bool:
             return t_now > t_mesh + 1e-9  # a failure on a mesh that has deformed since
 
-        solver = NewtonSolver(form, dataclasses.replace(
-            options, start_load=t, stop_when=degenerate, stop_on_failure=moved))
-        if rezones:  # equilibrate the carried-over state on the new mesh first
-            r0 = solver.scaled_norm(solver.residual(form.gfu.vec))
-            ok, its, norm = solver.newton(form.gfu.vec)
-            log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
-                     t, r0, norm, its)
+        solver.opt = dataclasses.replace(options, start_load=t, stop_when=degenerate,
+                                         stop_on_failure=moved)
         sol = solver.solve()
         total = sol if total is None else _merged(total, sol)
         if sol.converged or rezones >= rezoning.max_rezones:
@@ -89,11 +87,29 @@ def solve_with_rezoning(
             break  # failed on a fresh mesh: rezoning cannot help
         q = float(deformed_quality(form.mesh, form.u).min())
         log.info("  rezoning at load %.4f (smallest deformed quality %.3f)", sol.load, q)
-        rz = rezone(form.mesh, form.u, rezoning.project, rezoning.h, rezoning.h_corner,
-                    rezoning.corners)
-        new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
-        transfer_state(form, new, rz)
-        form, t = new, sol.load
+        try:
+            rz = rezone(form.mesh, form.u, rezoning.project, rezoning.h, rezoning.h_corner,
+                        rezoning.corners)
+            new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
+            transfer_state(form, new, rz)
+            new_solver = NewtonSolver(new, options)
+            new.set_load(sol.load)
+            # equilibrate the carried-over state on the new mesh before the ramp goes on
+            r0 = new_solver.scaled_norm(new_solver.residual(new.gfu.vec))
+            ok, its, norm = new_solver.newton(new.gfu.vec)
+            log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
+                     sol.load, r0, norm, its)
+            if not ok:
+                raise ConvergenceError(f"the carried-over state did not equilibrate "
+                                       f"(|R| = {norm:.2e})")
+        except (ConvergenceError, RuntimeError, NgException) as exc:
+            # the old mesh keeps the last converged state
+            sol.message = (f"Newton stalled at load {sol.load:.4f} of 1 (swelling ramp) and "
+                           f"rezoning there failed: {exc}; the last converged state is kept")
+            log.warning("  %s", sol.message)
+            break
+        form, solver, t = new, new_solver, sol.load
+        total.steps[-1].newton_iterations += its
         rezones += 1
     total.form = form
     total.converged = sol.converged
