@@ -70,6 +70,7 @@ def solve_with_rezoning(
     total: Solution | None = None
     t, rezones = options.start_load, 0
     solver = NewtonSolver(form, options)
+    failed = ""  # why the last rezoning failed: then the ramp goes on without it
     while True:
         def degenerate(f: MixedForm = form) -> bool:
             return float(deformed_quality(f.mesh, f.u).min()) < rezoning.q_min
@@ -77,8 +78,9 @@ def solve_with_rezoning(
         def moved(t_now: float, t_mesh: float = t) -> bool:
             return t_now > t_mesh + 1e-9  # a failure on a mesh that has deformed since
 
-        solver.opt = dataclasses.replace(options, start_load=t, stop_when=degenerate,
-                                         stop_on_failure=moved)
+        hooks = {} if failed else {"stop_when": degenerate, "stop_on_failure": moved}
+        solver.opt = dataclasses.replace(options, start_load=t, **hooks)
+        solver.t_assembly = solver.t_solve = 0.0  # per segment, summed by _merged
         sol = solver.solve()
         total = sol if total is None else _merged(total, sol)
         if sol.converged or rezones >= rezoning.max_rezones:
@@ -103,11 +105,11 @@ def solve_with_rezoning(
                 raise ConvergenceError(f"the carried-over state did not equilibrate "
                                        f"(|R| = {norm:.2e})")
         except (ConvergenceError, RuntimeError, NgException) as exc:
-            # the old mesh keeps the last converged state
-            sol.message = (f"Newton stalled at load {sol.load:.4f} of 1 (swelling ramp) and "
-                           f"rezoning there failed: {exc}; the last converged state is kept")
-            log.warning("  %s", sol.message)
-            break
+            # the old mesh keeps the last converged state; go on there without rezoning
+            failed = f"rezoning at load {sol.load:.4f} failed: {exc}"
+            log.warning("  %s; going on without rezoning", failed)
+            t = sol.load
+            continue
         form, solver, t = new, new_solver, sol.load
         total.steps[-1].newton_iterations += its
         rezones += 1
@@ -118,6 +120,8 @@ def solve_with_rezoning(
     total.wall_time_s = time.perf_counter() - start
     if not sol.converged and not sol.message:
         total.message = f"stopped at load {sol.load:.4f}"
+    if failed and not sol.converged:
+        total.message += f" ({failed})"
     return total, solver
 
 
