@@ -7,7 +7,7 @@ import ngsolve as ngs
 import numpy as np
 import pytest
 
-from brainbulge.errors import InputError
+from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.geometry.hemidisk import Hemidisk
 from brainbulge.geometry.rezone import _topology, deformed_quality, rezone, triangle_quality
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
@@ -109,3 +109,21 @@ def test_rezoning_keeps_the_solution() -> None:
 def test_start_load_is_checked() -> None:
     with pytest.raises(InputError, match="start_load"):
         SolverOptions(start_load=1.0)
+
+
+def test_a_failed_rezoning_goes_on_without_it() -> None:
+    """A rezoning that fails (here: the projection refuses) leaves the old mesh's converged
+    state, and the ramp goes on there to full load, as without rezoning."""
+    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1)
+    geo = case.geometry
+
+    def refuse(label: str, X: np.ndarray) -> np.ndarray:
+        raise ConvergenceError("no projection")
+
+    rezoning = Rezoning(lambda m: hemidisk_problem(case, m), refuse, 0.1, 0.02,
+                        geo.singular_points(), q_min=1.1)
+    problem = hemidisk_problem(case)
+    sol, _ = solve_with_rezoning(problem, rezoning, options=SolverOptions(steps=4))
+    assert sol.converged and sol.rezones == 0
+    assert sol.form.mesh is problem.mesh
+    assert sol.load == 1.0
