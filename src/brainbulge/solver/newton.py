@@ -400,8 +400,11 @@ class NewtonSolver:
 
     # --- contact -----------------------------------------------------------------------
     def max_penetration(self) -> float:
-        """Largest penetration ``max(-g, 0)`` at boundary integration points [length]."""
-        pen = max((pc.max_penetration() for pc in self.form.point_contacts), default=0.0)
+        """Largest penetration ``max(-g, 0)`` at boundary integration points [length]; for
+        point contacts at the points that move (a clamped point may overlap the obstacle at
+        rest by the surface's geometric error: it is not in contact)."""
+        pen = max((pc.max_penetration(pc_free(pc, self)) for pc in self.form.point_contacts),
+                  default=0.0)
         if not self.form.contact_gaps:
             return pen
         from brainbulge.results.quadrature import quadrature_points

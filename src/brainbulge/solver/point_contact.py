@@ -202,10 +202,12 @@ class PointContact:
         """Contact pressure ``lambda`` at the points [stress]."""
         return self.lam
 
-    def max_penetration(self) -> float:
-        """Largest ``max(-g, 0)`` at the contact points of the current state [length]."""
+    def max_penetration(self, points: np.ndarray | None = None) -> float:
+        """Largest ``max(-g, 0)`` at the contact points (or the mask ``points`` of them) of
+        the current state [length]."""
         self.update(self.form.gfu.vec.FV().NumPy())
-        return float(np.maximum(np.max(-self.g), 0.0)) + 0.0  # + 0.0: no -0.0 in reports
+        g = self.g if points is None else self.g[points]
+        return float(np.maximum(np.max(-g, initial=0.0), 0.0)) + 0.0  # no -0.0 in reports
 
     def free_measure(self, tol: float) -> float:
         """Area of the boundary that is away from the obstacle by more than ``tol`` at rest."""
