@@ -88,7 +88,7 @@ class PointContact:
                 vals.append(1.0)
         if order2:
             edges = sorted({e.nr for el in faces for e in el.edges})
-            beta = _edge_bubble_midpoint_value(mesh, V)
+            beta = edge_bubble_midpoint_value(mesh, V)
             e_index = {e: n_v + j for j, e in enumerate(edges)}
             e_weight = np.zeros(len(edges))
             w_mid = 1 / 4 if dim == 3 else 1 / 2
@@ -229,7 +229,7 @@ def _facet_measure(pts: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(pts[:, 1] - pts[:, 0], pts[:, 2] - pts[:, 0]), axis=1)
 
 
-def _edge_bubble_midpoint_value(mesh: ngs.Mesh, V: ngs.FESpace) -> float:
+def edge_bubble_midpoint_value(mesh: ngs.Mesh, V: ngs.FESpace) -> float:
     """Value at the edge midpoint of NGSolve's lowest-order edge shape function."""
     gf = ngs.GridFunction(V)
     edge = mesh.edges[0]

@@ -7,7 +7,9 @@ the deformed domain is meshed afresh and pulled back to the reference configurat
 (:func:`brainbulge.geometry.rezone.rezone`), the state ``(u, p, lambda)`` is carried over,
 and the ramp goes on from the same load. The material is hyperelastic, so the converged
 state at a load does not depend on the mesh history: rezoning changes the discretisation,
-not the problem.
+not the problem. The carried-over state is first equilibrated at the same load; if that (or the
+remeshing) fails, the old mesh keeps its converged state and the ramp goes on there without
+rezoning, so rezoning never ends a run earlier than the plain ramp would.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from brainbulge.geometry.rezone import (
 from brainbulge.model.problem import Problem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
-from brainbulge.solver.point_contact import _edge_bubble_midpoint_value
+from brainbulge.solver.point_contact import edge_bubble_midpoint_value
 
 log = logging.getLogger("brainbulge")
 
@@ -168,7 +170,7 @@ def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
             uvec[dof] = rz.u_vertices[v, i]
     X = np.array([p.point for p in mesh.vertices])[:, : mesh.dim]
     if V.globalorder >= 2:
-        beta = _edge_bubble_midpoint_value(mesh, V)
+        beta = edge_bubble_midpoint_value(mesh, V)
         ends = np.array([[v.nr for v in e.vertices] for e in mesh.edges])
         mid = 0.5 * (X[ends[:, 0]] + X[ends[:, 1]])
         inward = mid.copy()  # the centroid of a triangle at each edge
