@@ -227,6 +227,7 @@ def test_small_disk_matches_inclusion_map() -> None:
         ({"contact": "glue"}, "contact"),
         ({"beta": 120.0, "opening_center": 20.0}, "opening"),
         ({"material": "jelly"}, "preset"),
+        ({"rezone": "yes"}, "rezone"),
     ],
 )
 def test_bad_input_one_line(kw, match) -> None:

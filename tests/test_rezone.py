@@ -127,3 +127,29 @@ def test_a_failed_rezoning_goes_on_without_it() -> None:
     assert sol.converged and sol.rezones == 0
     assert sol.form.mesh is problem.mesh
     assert sol.load == 1.0
+
+
+def test_stop_hooks_keep_the_last_converged_state() -> None:
+    """``stop_on_failure`` ends the ramp at the last converged load instead of cutting the
+    step; ``stop_when`` after an accepted step. Both keep that state."""
+    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1)
+    asked: list[float] = []
+
+    def stop(t: float) -> bool:
+        asked.append(t)
+        return True
+
+    form = MixedForm(hemidisk_problem(case))
+    # one Newton iteration per attempt cannot converge a quarter of the swelling
+    sol = NewtonSolver(form, SolverOptions(steps=4, max_iterations=1,
+                                           stop_on_failure=stop)).solve()
+    assert sol.stopped_early and not sol.converged
+    assert asked == [0.0] and sol.load == 0.0 and sol.rejected_steps == 1
+    assert np.abs(form.u.vec.FV().NumPy()).max() == 0.0  # back at the undeformed state
+
+    form = MixedForm(hemidisk_problem(case))
+    sol = NewtonSolver(form, SolverOptions(steps=4, stop_when=lambda: True)).solve()
+    assert sol.stopped_early and sol.load == pytest.approx(0.25) and len(sol.steps) == 1
+    J_err = ngs.Integrate(ngs.Det(form.F()) - form.Js, form.mesh)  # at load 0.25
+    Js_025 = ngs.Integrate(1 + 0.25 * (form.Js - 1) - form.Js, form.mesh)
+    assert abs(J_err - Js_025) < 1e-9

@@ -72,6 +72,8 @@ class HemidiskCase:
             raise InputError(f"swelling Js = {self.swelling!r} must be a number")
         if self.swelling <= 0:
             raise InputError(f"swelling Js = {self.swelling} must be positive (1.2 = 20% swelling)")
+        if not isinstance(self.rezone, bool):
+            raise InputError(f"rezone = {self.rezone!r} must be true or false")
         if self.edge_exclusion < 0:
             raise InputError(f"edge exclusion {self.edge_exclusion} must be >= 0")
         if self.disk is not None and self.alpha is not None:
