@@ -257,6 +257,9 @@ def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -
         def __init__(self, inner):
             self.inner = inner
 
+        def on_pattern(self, A):
+            return self.inner.on_pattern(A)
+
         def factorize(self, A):
             self.inner.factorize(A)
 
@@ -273,6 +276,46 @@ def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -
     solver._general = Broken(solver._general)
     with pytest.raises(ConvergenceError, match="lost accuracy"):
         solver.solve(K, r)
+
+
+def test_direct_solver_analyses_a_sparsity_pattern_once(swollen, monkeypatch) -> None:
+    """Tangents on a known pattern (or a subset of it: a smaller active set, dropped zeros)
+    are factorised without a new symbolic analysis (PARDISO phase 22, not 12), and solved
+    as accurately as with one; a new nonzero position brings a new analysis."""
+    _, _, K, r = swollen
+    solver = PardisoSolver()
+    phases: list[int] = []
+    inner = solver._symmetric
+    original = type(inner)._call_pardiso
+
+    def spy(self, A, b):
+        phases.append(self.phase)
+        return original(self, A, b)
+
+    monkeypatch.setattr(type(inner), "_call_pardiso", spy)
+    K = K.tocsr()
+    x = solver.solve(K, r)
+    assert 12 in phases
+    K2 = K.copy()
+    K2.data = K2.data * (1 + 0.1 * np.cos(np.arange(K2.nnz)))  # new values, same pattern
+    K2 = 0.5 * (K2 + K2.T)
+    C = K2.tocoo()
+    pick = np.flatnonzero(C.row != C.col)[:6]  # six pairs dropped: a subset of the pattern
+    drop = sp.coo_matrix((np.ones(6), (C.row[pick], C.col[pick])), shape=K2.shape)
+    K2 = (K2 - K2.multiply((drop + drop.T) > 0)).tocsr()
+    K2.eliminate_zeros()
+    assert K2.nnz < K.nnz
+    phases.clear()
+    x2 = solver.solve(K2, r)
+    assert 22 in phases and 12 not in phases
+    assert np.linalg.norm(K2 @ x2 - r) <= 1e-9 * np.linalg.norm(r)
+    assert np.linalg.norm(x2 - x) > 1e-6 * np.linalg.norm(x)  # another matrix, solved anew
+    n = K.shape[0]
+    K3 = (K + sp.coo_matrix(([1e-3, 1e-3], ([0, n - 1], [n - 1, 0])), shape=K.shape)).tocsr()
+    phases.clear()
+    x3 = solver.solve(K3, r)
+    assert 12 in phases  # the new entries (0, n-1) need a new analysis
+    assert np.linalg.norm(K3 @ x3 - r) <= 1e-9 * np.linalg.norm(r)
 
 
 def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:

@@ -38,11 +38,8 @@ class PardisoSolver:
     """
 
     def __init__(self) -> None:
-        _point_pypardiso_to_mkl()
-        import pypardiso
-
-        self._symmetric = pypardiso.PyPardisoSolver(mtype=-2)
-        self._general = pypardiso.PyPardisoSolver(mtype=11)
+        self._symmetric = _pattern_reusing_pardiso(mtype=-2)
+        self._general = _pattern_reusing_pardiso(mtype=11)
         self._lu_only = False  # after one failure of the symmetric mode: its matrices fail on
 
     def solve(self, K: sp.csr_matrix, r: np.ndarray) -> np.ndarray:
@@ -68,6 +65,7 @@ def _refined(solver, A: sp.csr_matrix, K: sp.csr_matrix, r: np.ndarray, norm_r: 
              ) -> tuple[np.ndarray, float]:
     """Factorise ``A`` (``K`` or its upper triangle), solve, refine against ``K`` (3 steps at
     most); return ``x`` and ``|r - K x| / |r|``."""
+    A = solver.on_pattern(A)
     solver.factorize(A)
     x = solver.solve(A, r)
     for _ in range(3):
@@ -75,8 +73,63 @@ def _refined(solver, A: sp.csr_matrix, K: sp.csr_matrix, r: np.ndarray, norm_r: 
         if not np.all(np.isfinite(defect)) or np.linalg.norm(defect) <= 1e-10 * norm_r:
             break
         x = x + solver.solve(A, defect)
-    solver.free_memory(everything=True)
+    solver.free_memory()  # the factors; the symbolic analysis is kept for the next tangent
     return x, float(np.linalg.norm(r - K @ x) / norm_r)
+
+
+def _pattern_reusing_pardiso(mtype: int):
+    """A ``pypardiso`` solver that redoes PARDISO's symbolic analysis (fill-reducing ordering,
+    phase 11) only when a matrix brings new nonzero positions, and otherwise factorises
+    numerically (phase 22). Matrices are put on the union of the sparsity patterns seen so
+    far (:meth:`on_pattern`; stored zeros where one has no entry): Newton's tangents differ
+    in pattern only by the contact active set, so the union settles after a few iterations.
+    Measured on the 8k-DOF hemidisk tangent: 20 ms -> 5 ms per factorisation. (pypardiso
+    always runs phases 11 and 22 together; it has no switch for this.)"""
+    _point_pypardiso_to_mkl()
+    import pypardiso
+
+    class PatternReusingPardiso(pypardiso.PyPardisoSolver):
+        _union: sp.csr_matrix | None = None  # the union pattern (values unused)
+        _keys: np.ndarray | None = None  # its entries as row * n + col, ascending
+        _analysed = False
+
+        def on_pattern(self, A: sp.csr_matrix) -> sp.csr_matrix:
+            """``A`` on the union pattern, which grows (and is analysed anew) if needed."""
+            A.sort_indices()
+            keys = _csr_keys(A)
+            U = self._union
+            if U is not None and U.shape == A.shape:
+                idx = np.minimum(np.searchsorted(self._keys, keys), len(self._keys) - 1)
+                if np.array_equal(self._keys[idx], keys):
+                    data = np.zeros(U.nnz)
+                    data[idx] = A.data
+                    return sp.csr_matrix((data, U.indices, U.indptr), shape=A.shape)
+                keys = np.union1d(self._keys, keys)
+            n = A.shape[1]
+            rows, cols = np.divmod(keys, n)
+            self._union = sp.csr_matrix((np.ones(len(keys)), (rows, cols)), shape=A.shape)
+            self._keys = keys
+            self._analysed = False
+            return self.on_pattern(A)
+
+        def factorize(self, A: sp.csr_matrix) -> None:
+            """Factorise ``A``, a matrix returned by :meth:`on_pattern`."""
+            self._check_A(A)
+            if not self._analysed:
+                self.free_memory(everything=True)
+            self.factorized_A = (A.copy() if A.nnz <= self.size_limit_storage
+                                 else self._hash_csr_matrix(A))  # as pypardiso does
+            self.set_phase(22 if self._analysed else 12)
+            self._call_pardiso(A, np.zeros((A.shape[0], 1)))
+            self._analysed = True
+
+    return PatternReusingPardiso(mtype=mtype)
+
+
+def _csr_keys(A: sp.csr_matrix) -> np.ndarray:
+    """The entries of a CSR matrix with sorted indices as ascending ``row * n + col``."""
+    rows = np.repeat(np.arange(A.shape[0], dtype=np.int64), np.diff(A.indptr))
+    return rows * A.shape[1] + A.indices
 
 
 def _point_pypardiso_to_mkl() -> None:

@@ -222,7 +222,10 @@ class NewtonSolver:
         multipliers go to zero (``dlam_I = lam_I``) and ``(dx, dlam_A)`` solves
         ``[[K, -B_A^T], [-B_A, 0]] [dx, dlam_A] = [R + B_I^T lam_I, -A g_A]``, with the
         constraints eliminated at their nodes (:class:`NodalElimination`) when each acts on
-        one node, else in augmented form (:func:`_augmented`).
+        one node, else in augmented form (:func:`_augmented`). The augmented system keeps a
+        row for every moving contact point, ``dlam_i = lam_i`` for the inactive ones, so its
+        size and sparsity do not change with the active set (the direct solver then redoes
+        only the numeric factorisation).
 
         ``guess``: the linear system's solution of a retry at the same state (another
         active set, or a tighter tolerance), an initial guess for an iterative solver; the
@@ -234,45 +237,55 @@ class NewtonSolver:
         rhs = x.CreateVector()
         rhs.data = self.res  # residual at x: newton() always evaluates x last
         dlams: list[np.ndarray] = []
-        rows_B, rhs_B = [], []
+        rows_B = []  # (contact, its moving points, which of them are active)
         self._last_active = []
         for pc, forced in zip(self.form.point_contacts, self._forced, strict=True):
             act = (pc.active(self.c_active) | forced) & pc_free(pc, self)
             self._last_active.append(act)
-            dlam = pc.lam.copy()  # inactive: to zero
-            idle = np.flatnonzero(~act)
             pc.add_forces(rhs.FV().NumPy(), -np.where(act, 0.0, pc.lam))  # + B_I^T lam_I
-            dlams.append(dlam)
-            on = np.flatnonzero(act)
-            rows_B.append((pc, on))
-            rhs_B.append(-pc.weights[on] * pc.g[on])
-            dlam[idle] = pc.lam[idle]
+            dlams.append(pc.lam.copy())  # inactive: to zero
+            moving = np.flatnonzero(pc_free(pc, self))
+            rows_B.append((pc, moving, act[moving]))
         if self.form.condense:
             rhs.data += a.harmonic_extension_trans * rhs
         b = rhs.FV().NumPy()[self.free]
         elimination = None
+        solved: list[np.ndarray] = []  # the points whose dlam the linear system gives
         if rows_B:
-            B = sp.vstack([pc.B(on) for pc, on in rows_B]).tocsr()[:, self.free]
-            nB = B.shape[0]
+            B_all = sp.vstack([pc.B(pts) for pc, pts, _ in rows_B]).tocsr()[:, self.free]
+            on = np.concatenate([o for _, _, o in rows_B])
+            B = B_all[on]
+            c = np.concatenate([-pc.weights[pts[on]] * pc.g[pts[on]] for pc, pts, on in rows_B])
             n = K.shape[0]
-            c = np.concatenate(rhs_B)
-            if nB and NodalElimination.applies(B):
-                elimination = NodalElimination(K, B, c, self.is_u_free)
-                K, b = elimination.system(b)
-                if guess is not None and len(guess) == len(b):
-                    # y has no normal part at the constrained nodes (N^T y = 0); a guess
-                    # from another active set does, which the d N N^T rows magnify
-                    guess = elimination.project(guess)
+            if NodalElimination.applies(B_all):  # each point's row on a node of its own
+                if B.shape[0]:
+                    solved = [pts[on] for _, pts, on in rows_B]
+                    elimination = NodalElimination(K, B, c, self.is_u_free)
+                    K, b = elimination.system(b)
+                    if guess is not None and len(guess) == len(b):
+                        # y has no normal part at the constrained nodes (N^T y = 0); a guess
+                        # from another active set does, which the d N N^T rows magnify
+                        guess = elimination.project(guess)
             else:
-                if nB:
+                if B.shape[0]:
                     K, b = _augmented(K, b, B, c, self.is_u_free)
+                # a row per moving point: -B_i dx = c_i if active, -s dlam_i = -s lam_i if not
+                solved = [pts for _, pts, _ in rows_B]
+                B_all = sp.diags(on.astype(float)) @ B_all
+                lam = np.concatenate([pc.lam[pts] for pc, pts, _ in rows_B])
+                s_idle = float(np.mean(np.abs(K.diagonal()[: len(self.is_u_free)]
+                                              [self.is_u_free])))
+                D = sp.diags(np.where(on, 0.0, -s_idle))
+                c_all = -s_idle * lam
+                c_all[on] = c
+                nB = len(on)
                 K = _coo_sum(
-                    [K.tocoo(), (-B).T.tocoo(), (-B).tocoo(), sp.coo_matrix((nB, nB))],
+                    [K.tocoo(), (-B_all).T.tocoo(), (-B_all).tocoo(), D.tocoo()],
                     (n + nB, n + nB),
                     offsets=[(0, 0), (0, n), (n, 0), (n, n)],
                     diagonal=True,
                 )
-                b = np.concatenate([b, c])
+                b = np.concatenate([b, c_all])
         t0 = time.perf_counter()
         if self.inexact:
             sol = self.linear.solve(K, b, rtol=self.eta, x0=guess)
@@ -286,9 +299,9 @@ class NewtonSolver:
         dx[:] = 0
         dx.FV().NumPy()[self.free] = sol[: len(self.free)]
         k = len(self.free)
-        for (_, on), dlam in zip(rows_B, dlams, strict=True):
-            dlam[on] = sol[k : k + len(on)]
-            k += len(on)
+        for pts, dlam in zip(solved, dlams, strict=True):
+            dlam[pts] = sol[k : k + len(pts)]
+            k += len(pts)
         if self.form.condense:
             dx.data += a.harmonic_extension * dx
             dx.data += a.inner_solve * rhs
