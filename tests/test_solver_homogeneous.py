@@ -6,7 +6,7 @@ import ngsolve as ngs
 import numpy as np
 import pytest
 
-from brainbulge.errors import InfeasibleError
+from brainbulge.errors import InfeasibleError, InputError
 from brainbulge.materials import MooneyRivlin, Ogden
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions, solve
@@ -171,3 +171,28 @@ def test_energy_compiled_to_machine_code_gives_the_same_residual_and_tangent() -
     (r0, K0), (r1, K1) = out
     np.testing.assert_allclose(r1, r0, rtol=1e-9, atol=1e-12 * np.abs(r0).max())
     np.testing.assert_allclose(K1, K0, rtol=1e-9, atol=1e-12 * np.abs(K0).max())
+
+
+def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
+    """Below full load Newton stops at ``intermediate_tolerance``, at full load at
+    ``tolerance``: fewer iterations, the same final state (hyperelastic: path independent)."""
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1)
+    sols = []
+    for itol in (1e-9, 1e-5):
+        form = MixedForm(hemidisk_problem(case))
+        solver = NewtonSolver(form, SolverOptions(steps=4, tolerance=1e-9,
+                                                  intermediate_tolerance=itol))
+        sol = solver.solve()
+        assert sol.converged
+        finals = [h[-1] for h in solver.history]
+        assert finals[-1] <= 1e-9
+        sols.append((sol, solver, form.gfu.vec.FV().NumPy().copy(), finals))
+    (tight, _, x_tight, f_tight), (loose, _, x_loose, f_loose) = sols
+    assert max(f_tight) <= 1e-9
+    assert max(f_loose[:-1]) <= 1e-5 and max(f_loose[:-1]) > 1e-9  # stopped early below load 1
+    assert loose.newton_iterations < tight.newton_iterations
+    assert np.linalg.norm(x_loose - x_tight) <= 1e-6 * np.linalg.norm(x_tight)
+    with pytest.raises(InputError, match="must be positive"):
+        SolverOptions(intermediate_tolerance=0.0)
