@@ -49,6 +49,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
 
@@ -541,7 +542,7 @@ class BlockKrylovSolver:
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
         A, Bt, C = self._update(K)
-        with _single_threaded_blas():
+        with serial_openblas():  # small BLAS-2 work: threads cost more than they give
             x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0)
         if self._ref_iterations is None:
             self._ref_iterations = max(its, 1)
@@ -601,22 +602,6 @@ class BlockKrylovSolver:
             # restart from the true defect asking for more than the remaining reduction
             inner_rtol = max(inner_rtol * rtol / res, 1e-16)
         return x, its, res
-
-
-def _single_threaded_blas():
-    """BLAS on one thread for the Krylov loop.
-
-    Its dense work is small BLAS-2 (Gram-Schmidt on a few dozen vectors), where OpenBLAS'
-    threads cost more than they give: 16 ms against 1.2 ms single-threaded for 60 x 18k on
-    this 2-core machine under load.
-    """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        from contextlib import nullcontext
-
-        return nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _minres(K, b: np.ndarray, M, rtol: float, maxiter: int) -> tuple[np.ndarray, int, float]:

@@ -32,6 +32,7 @@ from brainbulge.errors import ConvergenceError, InfeasibleError, InputError
 from brainbulge.model.problem import Problem
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
 
@@ -319,7 +320,11 @@ class NewtonSolver:
 
     def newton(self, x: ngs.BaseVector) -> tuple[bool, int, float]:
         """Solve at the current load from the guess ``x`` (updated in place, with the
-        point contacts' multipliers)."""
+        point contacts' multipliers); returns (converged, iterations, scaled residual)."""
+        with serial_openblas():  # see brainbulge.solver.threads
+            return self._newton(x)
+
+    def _newton(self, x: ngs.BaseVector) -> tuple[bool, int, float]:
         pcs = self.form.point_contacts
         # points forced into the active set for this solve: inactive points that a full
         # Newton step pushed into the skull (left alone, such a weakly active point makes

@@ -1,0 +1,23 @@
+"""Thread pools of the numerical libraries under the solvers.
+
+NGSolve assembles with its own task threads and MKL PARDISO factorises with OpenMP; the
+vector work between them (norms, dot products, Gram-Schmidt) goes through NumPy's OpenBLAS,
+whose pthreads spin-wait ~0.2 s after every call on vectors above ~10k entries. On two cores
+those spinning threads then slow NGSolve's next assembly: a hemidisk residual took 40-50 ms
+after a solve against 10-11 ms with OpenBLAS on one thread (13k DOFs, measured). Vector work
+of this size gains nothing from threads, so the solvers run it on one.
+"""
+
+from __future__ import annotations
+
+from contextlib import AbstractContextManager, nullcontext
+
+
+def serial_openblas() -> AbstractContextManager:
+    """Context in which OpenBLAS (NumPy's and NGSolve's) runs on one thread; MKL (PARDISO)
+    and NGSolve's task manager keep theirs."""
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:  # pragma: no cover - threadpoolctl is a declared dependency
+        return nullcontext()
+    return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
