@@ -17,7 +17,8 @@ The table gives tets, DOFs, mesh time, solve time (assembly / linear solve), the
 with its outputs, Newton and Krylov iterations, peak resident memory, the midline shift, the
 bulge volume and the penetration; then, per size with a baseline, each variant's speed-up
 over it: in the whole solve when both reach Js = 1.1, and always per Newton iteration (a run
-that stops early reports its partial summary, marked as such). Each run logs its Newton residuals to ``CACHE/run_N_VARIANT.log``.
+that stops early reports its partial summary, marked as such). Each run logs its Newton
+residuals to ``CACHE/run_N_VARIANT.log``.
 """
 
 from __future__ import annotations

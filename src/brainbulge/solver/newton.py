@@ -214,13 +214,11 @@ class NewtonSolver:
         t0 = time.perf_counter()
         with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
             self.form.a.AssembleLinearization(x)
-        K = sp.csr_matrix(self.form.a.mat.CSR())
-        if self.form.point_contacts:
-            parts = [K.tocoo()]
-            for pc in self.form.point_contacts:
-                pc.update(x.FV().NumPy())
-                parts.append(-pc.curvature().tocoo())
-            K = _coo_sum(parts, K.shape)
+        mat = self.form.a.mat  # (the width, as unused last DOFs leave trailing empty columns)
+        K = sp.csr_matrix(mat.CSR(), shape=(mat.height, mat.width))
+        for pc in self.form.point_contacts:
+            pc.update(x.FV().NumPy())
+            K = K - pc.curvature()  # CSR sums: the direct solver restores the diagonal
         self.t_assembly += time.perf_counter() - t0
         return K[self.free][:, self.free]
 
@@ -743,7 +741,7 @@ class NodalElimination:
         KN = (K @ N).tocsc()
         core = NtK @ N + self.d * sp.identity(N.shape[1])
         dK = -(N @ NtK) - KN @ N.T + N @ core @ N.T
-        Kp = _coo_sum([K.tocoo(), dK.tocoo()], K.shape, diagonal=True)
+        Kp = (K + dK).tocsr()
         return Kp, self.project(b - K @ (N @ self.gbar))
 
     def recover(self, y: np.ndarray) -> np.ndarray:
