@@ -5,7 +5,9 @@ vector work between them (norms, dot products, Gram-Schmidt) goes through NumPy'
 whose pthreads spin-wait ~0.2 s after every call on vectors above ~10k entries. On two cores
 those spinning threads then slow NGSolve's next assembly: a hemidisk residual took 40-50 ms
 after a solve against 10-11 ms with OpenBLAS on one thread (13k DOFs, measured). Vector work
-of this size gains nothing from threads, so the solvers run it on one.
+of this size gains nothing from threads, so Newton runs it on one next to the direct solver
+(the Krylov path's long vectors keep their threads: the 111k-tet brain was 10 % slower on
+one; its Gram-Schmidt is limited inside the Krylov loop).
 """
 
 from __future__ import annotations
