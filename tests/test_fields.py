@@ -45,3 +45,29 @@ def test_radial_directions() -> None:
     X = np.array([[3.0, 4.0], [0.0, 0.0]])
     n = radial_directions(X, np.zeros(2))
     np.testing.assert_allclose(n, [[0.6, 0.8, 0.0], [0.0, 0.0, 0.0]])
+
+
+def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
+    """The summary evaluates the fields a chunk of integration points at a time (memory of
+    the 1.54M-tet brain); chunks of any size give the same extremes, locations and integrals."""
+    import brainbulge.results.summary as summary
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1)
+    geo = case.geometry
+    solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
+    sol = solver.solve()
+    assert sol.converged
+
+    def run() -> dict:
+        return summary.solution_summary(sol, solver, np.zeros(2), geo.singular_points(), 0.05)
+
+    whole = run()
+    monkeypatch.setattr(summary, "CHUNK", 97)  # uneven: the last chunk is short
+    chunked = run()
+    assert len(sol.form.mesh.ngmesh.Elements2D()) * 6 > 10 * 97  # several chunks
+    for key in ("max_radial_stretch", "min_tangential_stretch", "max_principal_strain",
+                "raw_max_radial_stretch", "max_displacement", "integral_J_minus_Js",
+                "swelling_volume", "max_abs_J_minus_Js", "argmax_radial_stretch"):
+        assert chunked[key] == pytest.approx(whole[key], rel=1e-12, abs=1e-15), key

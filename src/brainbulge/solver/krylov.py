@@ -473,6 +473,11 @@ class BlockKrylovSolver:
         """Rebuild the AMG hierarchies at the next solve."""
         self._refresh_requested = True
 
+    def release(self) -> None:
+        """Free the AMG hierarchies (a later solve sets them up again)."""
+        self._amg_u.ml = self._amg_p.ml = None
+        self._ready = False
+
     def _update(self, K: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
         """New matrix: rebuild the hierarchies or reuse them (finest level refreshed)."""
         if not self._ready or self._refresh_requested:

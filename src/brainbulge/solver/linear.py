@@ -60,6 +60,12 @@ class PardisoSolver:
             )
         return _checked(x)
 
+    def release(self) -> None:
+        """Free PARDISO's memory, the symbolic analysis too (a later solve redoes it)."""
+        for solver in (self._symmetric, self._general):
+            solver.free_memory(everything=True)
+            solver._analysed = False
+
 
 def _refined(solver, A: sp.csr_matrix, K: sp.csr_matrix, r: np.ndarray, norm_r: float
              ) -> tuple[np.ndarray, float]:

@@ -181,6 +181,15 @@ class NewtonSolver:
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.last_linear_solution: np.ndarray | None = None
 
+    def release_linear_solver(self) -> None:
+        """Free the linear solver's work memory (AMG hierarchies, factorisations) after the
+        last solve, before the outputs are evaluated: the 3D output stage otherwise stacks
+        its memory on top of the solver's (a later solve rebuilds them)."""
+        release = getattr(self.linear, "release", None)
+        if release is not None:
+            release()
+        self.last_linear_solution = None
+
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
         """``R(x)`` (full DOF numbering) with the point contacts' forces at their current

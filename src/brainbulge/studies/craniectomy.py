@@ -105,6 +105,7 @@ def run_brain(
                       checkpoint=restart, checkpoint_key=key),
     )
     sol = solver.solve()
+    solver.release_linear_solver()
     if sol.converged:
         restart.unlink(missing_ok=True)
     fibres = _fibres(case, bm)
