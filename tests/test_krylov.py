@@ -418,3 +418,17 @@ def test_a_failed_line_search_on_a_loose_krylov_direction_retries_tighter(monkey
     assert sol.converged
     assert ns.tightened_solves >= 1
     assert len(ns.history) == 1  # one Newton solve: no load-step cut
+
+
+def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None:
+    """With scaling and weighted matching the symmetric-indefinite mode solves the hemidisk's
+    pressure/contact saddle point (h 0.04, corner 0.004) to the refinement tolerance; with
+    MKL's defaults it left 99 perturbed pivots and fell back to LU for the whole run."""
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.04,
+                        corner_mesh_size=0.004)
+    solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
+    sol = solver.solve()
+    assert sol.converged
+    assert not solver.linear._lu_only
