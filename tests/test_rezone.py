@@ -153,3 +153,24 @@ def test_stop_hooks_keep_the_last_converged_state() -> None:
     J_err = ngs.Integrate(ngs.Det(form.F()) - form.Js, form.mesh)  # at load 0.25
     Js_025 = ngs.Integrate(1 + 0.25 * (form.Js - 1) - form.Js, form.mesh)
     assert abs(J_err - Js_025) < 1e-9
+
+
+def test_rezoned_mesh_keeps_the_rim_refinement(rezoned) -> None:
+    """Reference points given as ``rim_points`` (the edge-exclusion circles) are refined to
+    ``h_rim`` at their images in the deformed domain, which the new mesh is made in."""
+    geo, mesh, u, rz = rezoned
+    rim = geo.rim_points(0.05, 0.005)
+    fine = rezone(mesh, u, geo.project, 0.1, 0.02, geo.singular_points(), rim, 0.005)
+    x_rim = rim + _map(rim)
+
+    def median_edge_near_rim(r) -> float:
+        top = _topology(r.mesh)
+        x = top.X + r.u_vertices  # the deformed vertices, where the mesh was made
+        d = np.min(np.linalg.norm(x[:, None] - x_rim[None], axis=2), axis=1)
+        P = x[top.tris[np.any(d[top.tris] < 0.003, axis=1)]]
+        longest = np.max([np.linalg.norm(P[:, i] - P[:, (i + 1) % 3], axis=1)
+                          for i in range(3)], axis=0)
+        return float(np.median(longest))
+
+    assert median_edge_near_rim(fine) < 2 * 0.005
+    assert median_edge_near_rim(rz) > 3 * 0.005

@@ -50,6 +50,13 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="element size at the singular points [units of R] (default h/5)",
     )
+    p.add_argument(
+        "--rim-mesh-size",
+        type=float,
+        default=None,
+        help="element size on the circles of radius --edge-exclusion around the singular "
+        "points, where the max_*/min_* extremes sit [units of R] (default h/10)",
+    )
     p.add_argument("--steps", type=int, default=4, help="initial number of load steps")
     p.add_argument("--element", choices=("taylor-hood", "mini"), default="taylor-hood")
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")
@@ -90,6 +97,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "R": args.radius,
         "mesh_size": args.mesh_size,
         "corner_mesh_size": args.corner_mesh_size,
+        "rim_mesh_size": args.rim_mesh_size,
         "steps": args.steps,
         "element": args.element,
         "material": args.material,

@@ -9,7 +9,10 @@ or a disk) and ``tissue``.
 The domain is glued from pie slices between all break angles, so the mesh conforms to the
 sector edges and has vertices at the opening corners; the mesh size is ``h`` and ``h_corner``
 near the singular points (opening corners, sector edges on the boundary), set through netgen's
-local size restrictions.
+local size restrictions. The ``max_*`` / ``min_*`` summary keys are extremes outside disks of
+radius ``edge_exclusion`` around the singular points, and they sit on the rims of those disks,
+where the ``r^-1/2`` field is steep: ``h_rim`` refines the mesh along these circles so that the
+extremes converge (docs/verification.md: within 1 % at 13k DOFs, against 61k without it).
 """
 
 from __future__ import annotations
@@ -106,12 +109,32 @@ class Hemidisk:
         k = np.argmin(np.abs(theta[:, None] - angles[None]), axis=1)
         return (X * dirs[k]).sum(1, keepdims=True) * dirs[k]
 
+    def rim_points(self, radius: float, spacing: float) -> np.ndarray:
+        """Points (n, 2) at most ``spacing`` apart on the circles of ``radius`` around the
+        singular points, those inside the hemidisk [length]."""
+        if not (radius > 0 and spacing > 0):
+            return np.zeros((0, 2))
+        n = max(8, math.ceil(2 * math.pi * radius / spacing))
+        t = 2 * math.pi * np.arange(n) / n
+        circle = radius * np.stack([np.cos(t), np.sin(t)], axis=1)
+        pts = (np.array(self.singular_points()).reshape(-1, 1, 2) + circle).reshape(-1, 2)
+        inside = (pts[:, 1] >= 0) & (np.linalg.norm(pts, axis=1) <= self.R)
+        return pts[inside]
+
     def _on_arc(self, deg: float) -> tuple[float, float]:
         t = math.radians(deg)
         return self.R * math.cos(t), self.R * math.sin(t)
 
-    def mesh(self, h: float = 0.05, h_corner: float | None = None) -> ngs.Mesh:
-        """Second-order (curved) triangle mesh; ``h_corner`` defaults to ``h/5``."""
+    def mesh(
+        self,
+        h: float = 0.05,
+        h_corner: float | None = None,
+        h_rim: float | None = None,
+        rim: float = 0.0,
+    ) -> ngs.Mesh:
+        """Second-order (curved) triangle mesh of element size ``h``, ``h_corner`` (default
+        ``h/5``) at the singular points and ``h_rim`` on the circles of radius ``rim`` around
+        them (:meth:`rim_points`; no rim refinement when ``h_rim`` is None) [length]."""
         if not (h > 0 and math.isfinite(h)) or h > self.R:
             raise InputError(f"mesh size {h} must be positive and at most R = {self.R}")
         hc = h_corner if h_corner is not None else h / 5
@@ -146,6 +169,9 @@ class Hemidisk:
         mp = MeshingParameters(maxh=h, grading=0.25)
         for px, py in self.singular_points():
             mp.RestrictH(x=px, y=py, z=0, h=hc)
+        if h_rim is not None:
+            for px, py in self.rim_points(rim, h_rim):
+                mp.RestrictH(x=float(px), y=float(py), z=0, h=h_rim)
         if self.disk is not None:
             cx, cy, rd = self.disk
             n = max(16, int(2 * math.pi * rd / hc / 2))

@@ -95,22 +95,32 @@ def rezone(
     h: float,
     h_corner: float,
     corners: Sequence[tuple[float, float]] = (),
+    rim_points: np.ndarray | None = None,
+    h_rim: float | None = None,
 ) -> Rezoned:
     """A reference mesh of ``mesh``'s domain that ``X + u(X)`` maps onto a fresh netgen mesh
-    of the deformed domain (sizes ``h``, ``h_corner`` at the images of ``corners``)."""
+    of the deformed domain (sizes ``h``, ``h_corner`` at the images of ``corners``, ``h_rim``
+    at the images of the reference points ``rim_points`` (n, 2))."""
     top = _topology(mesh)
     U = vertex_values(mesh, u, top.X)
     if not np.all(np.isfinite(U)):
         raise ConvergenceError("rezoning: the displacement is not finite at every vertex")
     x = top.X + U
     corner_ids = _nearest_vertices(top.X, corners)
-    x_corners = x[corner_ids] if len(corner_ids) else np.zeros((0, 2))
+    # every refined point with its size: the corners' and the rim points' images
+    x_fine = x[corner_ids] if len(corner_ids) else np.zeros((0, 2))
+    h_fine = np.full(len(x_fine), h_corner)
+    if rim_points is not None and len(rim_points) and h_rim is not None:
+        x_rim = rim_points + vertex_values(mesh, u, rim_points)
+        keep = np.all(np.isfinite(x_rim), axis=1)
+        x_fine = np.concatenate([x_fine, x_rim[keep]])
+        h_fine = np.concatenate([h_fine, np.full(int(keep.sum()), h_rim)])
 
     def size(p: np.ndarray) -> np.ndarray:
-        if not len(x_corners):
+        if not len(x_fine):
             return np.full(len(p), h)
-        d = np.min(np.linalg.norm(p[:, None, :] - x_corners[None], axis=2), axis=1)
-        return np.minimum(h, h_corner + GRADING_SLOPE * d)
+        d = np.linalg.norm(p[:, None, :] - x_fine[None], axis=2)
+        return np.minimum(h, np.min(h_fine + GRADING_SLOPE * d, axis=1))
 
     geo = SplineGeometry()
     point_id: dict[int, int] = {}
@@ -133,8 +143,8 @@ def rezone(
     for k, name in enumerate(top.regions):
         geo.SetMaterial(k + 1, name)
     mp = MeshingParameters(maxh=h, grading=0.25)
-    for px, py in x_corners:
-        mp.RestrictH(x=float(px), y=float(py), z=0, h=h_corner)
+    for (px, py), hp in zip(x_fine, h_fine, strict=True):
+        mp.RestrictH(x=float(px), y=float(py), z=0, h=float(hp))
     ngmesh = geo.GenerateMesh(mp=mp)
     coords = ngmesh.Coordinates()
     x_new = np.array(coords[:, :2], dtype=float)

@@ -49,6 +49,7 @@ class HemidiskCase:
     R: float = 1.0
     mesh_size: float = 0.05
     corner_mesh_size: float | None = None
+    rim_mesh_size: float | None = None
     steps: int = 4
     element: str = "taylor-hood"
     material: str = "paper"
@@ -76,6 +77,10 @@ class HemidiskCase:
             raise InputError(f"rezone = {self.rezone!r} must be true or false")
         if self.edge_exclusion < 0:
             raise InputError(f"edge exclusion {self.edge_exclusion} must be >= 0")
+        for name in ("corner_mesh_size", "rim_mesh_size"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise InputError(f"{name.replace('_', ' ')} {value} must be a positive number")
         if self.disk is not None and self.alpha is not None:
             self.alpha = None  # a disk replaces the default sector
 
@@ -100,6 +105,23 @@ class HemidiskCase:
         return self.mesh_size * self.R / 5
 
     @property
+    def rim_h(self) -> float | None:
+        """Element size on the rims of the edge-exclusion disks [length] (default a tenth of
+        the mesh size; None without edge exclusion)."""
+        if self.edge_exclusion <= 0:
+            return None
+        if self.rim_mesh_size is not None:
+            return self.rim_mesh_size * self.R
+        return self.mesh_size * self.R / 10
+
+    def mesh(self) -> ngs.Mesh:
+        """The reference mesh: ``mesh_size``, ``corner_h`` at the singular points and
+        ``rim_h`` on the rims of the edge-exclusion disks, where ``max_*`` / ``min_*`` sit."""
+        return self.geometry.mesh(
+            self.mesh_size * self.R, self.corner_h, self.rim_h, self.edge_exclusion * self.R
+        )
+
+    @property
     def skull(self) -> RigidSkull2D:
         return RigidSkull2D(
             R=self.R,
@@ -119,10 +141,9 @@ class HemidiskCase:
 def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Problem:
     """Mesh the hemidisk (or take ``mesh``, e.g. a rezoned one) and set materials, swelling
     and the contact condition."""
-    geo = case.geometry
     skull = case.skull
     if mesh is None:
-        mesh = geo.mesh(case.mesh_size * case.R, case.corner_h)
+        mesh = case.mesh()
     m = case.tissue_material()
     materials = {r: m for r in set(mesh.GetMaterials())}
     swelling = {"swelling": case.swelling}

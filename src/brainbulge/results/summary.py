@@ -52,7 +52,7 @@ def field_extremes(
                 idx = np.flatnonzero(keep)
                 i = int(idx[f(v[idx])])
                 out[f"{kind}_{prefix}{stem}"] = float(v[i])
-                if kind == "max" and stem != "principal_strain":
+                if kind == "max":
                     out[f"argmax_{prefix}{stem}"] = [float(c) for c in X[i]]
     return out
 

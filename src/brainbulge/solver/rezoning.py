@@ -47,13 +47,16 @@ Q_MIN = 0.2
 class Rezoning:
     """How to remesh: ``problem_on(mesh)`` rebuilds the problem on a new reference mesh,
     ``project(label, X)`` moves points onto the reference curve ``label``; sizes [length]
-    and the reference singular points ``corners`` (refined to ``h_corner``)."""
+    and the reference singular points ``corners`` (refined to ``h_corner``), and reference
+    points ``rim_points`` (n, 2) refined to ``h_rim``."""
 
     problem_on: Callable[[ngs.Mesh], Problem]
     project: Projector
     h: float
     h_corner: float
     corners: Sequence[tuple[float, float]]
+    rim_points: np.ndarray | None = None
+    h_rim: float | None = None
     q_min: float = Q_MIN
     max_rezones: int = 50
 
@@ -93,7 +96,7 @@ def solve_with_rezoning(
         log.info("  rezoning at load %.4f (smallest deformed quality %.3f)", sol.load, q)
         try:
             rz = rezone(form.mesh, form.u, rezoning.project, rezoning.h, rezoning.h_corner,
-                        rezoning.corners)
+                        rezoning.corners, rezoning.rim_points, rezoning.h_rim)
             new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
             transfer_state(form, new, rz)
             new_solver = NewtonSolver(new, options)

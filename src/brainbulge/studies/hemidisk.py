@@ -64,8 +64,10 @@ def run_hemidisk(
     geo = case.geometry
     options = SolverOptions(steps=case.steps, progress=progress)
     if case.rezone:
+        rim_h = case.rim_h
         rezoning = Rezoning(lambda mesh: hemidisk_problem(case, mesh), geo.project,
-                            case.mesh_size * case.R, case.corner_h, geo.singular_points())
+                            case.mesh_size * case.R, case.corner_h, geo.singular_points(),
+                            geo.rim_points(case.edge_exclusion * case.R, rim_h or 0.0), rim_h)
         sol, solver = solve_with_rezoning(problem, rezoning, case.element, options)
     else:
         solver = NewtonSolver(MixedForm(problem, element=case.element), options)
