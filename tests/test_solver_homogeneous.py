@@ -196,3 +196,34 @@ def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
     assert np.linalg.norm(x_loose - x_tight) <= 1e-6 * np.linalg.norm(x_tight)
     with pytest.raises(InputError, match="must be positive"):
         SolverOptions(intermediate_tolerance=0.0)
+
+
+def test_an_attempt_that_stagnates_stops_early() -> None:
+    """Newton directions that the line search can follow only in tiny steps (the true
+    direction with 5 % noise: the incompressible solid takes ~1/64 of it) end the attempt
+    after ``stagnation`` such iterations; with ``stagnation=0`` it goes on (here until the
+    line search finds no step at all)."""
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
+    runs = {}
+    for stagnation in (4, 0):
+        form = MixedForm(hemidisk_problem(case))
+        solver = NewtonSolver(form, SolverOptions(max_iterations=20, stagnation=stagnation))
+        rng = np.random.default_rng(0)
+
+        def noisy(x, K=None, guess=None, exact=solver.newton_direction, rng=rng):
+            dx, dlams = exact(x, K, guess)
+            v = dx.FV().NumPy()
+            v *= 1 + 0.05 * rng.standard_normal(v.size)
+            return dx, dlams
+
+        solver.newton_direction = noisy
+        form.set_load(0.5)
+        runs[stagnation] = solver.newton(form.gfu.vec)
+    (ok4, its4, norm4), (ok0, its0, norm0) = runs[4], runs[0]
+    assert not ok4 and not ok0
+    assert its4 == 4 and its0 > 8
+    assert norm0 < norm4  # the short steps did lower the residual, a little
+    with pytest.raises(InputError, match="stagnation"):
+        SolverOptions(stagnation=-1)

@@ -47,6 +47,11 @@ class SolverOptions:
         min_step: smallest load increment before giving up [-].
         max_step: largest load increment after growth [-].
         max_iterations: Newton iterations per attempt.
+        stagnation: an attempt stops early, as failed, after this many Newton iterations in
+            a row whose line search accepted at most 1/64 of the step and that together
+            lowered the residual by less than 5 % (where the load path folds, the 2D
+            alpha 80 / beta 30 runs spent all 20 iterations on 0.1-0.4 % steps, attempt
+            after attempt); 0 never stops early.
         tolerance: on the scaled residual (force / (mu L^(d-1)), volume / |Omega|).
         intermediate_tolerance: the same below full load (never tighter than
             ``tolerance``). The material is hyperelastic, so
@@ -73,6 +78,7 @@ class SolverOptions:
     min_step: float = 1e-3
     max_step: float = 1.0
     max_iterations: int = 20
+    stagnation: int = 4
     tolerance: float = 1e-9
     intermediate_tolerance: float = 1e-6
     penetration_tol: float = 1e-5
@@ -95,6 +101,8 @@ class SolverOptions:
                              f"{self.intermediate_tolerance!r} (intermediate) must be positive")
         if not (0 <= self.start_load < 1):
             raise InputError(f"start_load = {self.start_load!r} must lie in [0, 1)")
+        if not isinstance(self.stagnation, int) or self.stagnation < 0:
+            raise InputError(f"stagnation = {self.stagnation!r} must be an integer >= 0")
 
 
 @dataclass
@@ -343,6 +351,7 @@ class NewtonSolver:
         self.eta = self.eta_cap = ETA_MAX
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
+        short_steps, norm_before_short = 0, norm  # the run of short line-search steps
         for it in range(self.opt.max_iterations + 1):
             self.history[-1].append(norm)
             log.debug("    newton %d: |R| = %.3e", it, norm)
@@ -412,6 +421,10 @@ class NewtonSolver:
                         self.eta_cap = max(ETA_MIN, 1e-2 * min(self.eta, self.eta_cap))
                     self.eta = min(self.eta_cap, forcing_term(self.eta, trial / norm, trial,
                                                               self.tolerance))
+                    if s > 1 / 64:
+                        short_steps, norm_before_short = 0, trial
+                    else:
+                        short_steps += 1
                     norm = trial
                     break
                 x.data = x0
@@ -420,6 +433,11 @@ class NewtonSolver:
                 self.residual(x)
             for forced, pc in zip(self._forced, pcs, strict=True):
                 forced &= pc.lam >= 0  # a forced point that pulls is let go
+            if (0 < self.opt.stagnation <= short_steps and norm > self.tolerance
+                    and norm > 0.95 * norm_before_short):
+                log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
+                          norm_before_short)
+                return False, it + 1, norm
         return False, self.opt.max_iterations, norm
 
     def _force_penetrating(self) -> bool:
