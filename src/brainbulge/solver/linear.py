@@ -33,25 +33,34 @@ class PardisoSolver:
     refined against the full matrix until ``|K x - r| <= 1e-10 |r|``. Some contact saddle
     points defeat the symmetric mode (111k-tet brain, ~3,400 active contact rows: relative
     residual 3e-2 after refinement, with or without weighted matching); unsymmetric LU with
-    partial pivoting solves them to 1e-16 in 1.7x the time, so it takes over, for the rest of
-    the run, when the symmetric result misses 1e-6.
+    partial pivoting solves them to 1e-16 in 1.7x the time, so it takes over when the
+    symmetric result misses 1e-6: for that matrix, and for the rest of the run after
+    ``LU_AFTER`` such matrices in a row (a single miss, e.g. at the extrapolated first state
+    of a hemidisk load step with the rim-refined mesh, 1.4e-2, does not make the run 2x
+    slower).
     """
+
+    LU_AFTER = 2
 
     def __init__(self) -> None:
         self._symmetric = _pattern_reusing_pardiso(mtype=-2)
         self._general = _pattern_reusing_pardiso(mtype=11)
-        self._lu_only = False  # after one failure of the symmetric mode: its matrices fail on
+        self._lu_only = False  # after LU_AFTER failures of the symmetric mode in a row
+        self._misses = 0  # symmetric failures in a row
+        self.lu_solves = 0  # matrices solved by the fallback
 
     def solve(self, K: sp.csr_matrix, r: np.ndarray) -> np.ndarray:
         norm_r = max(float(np.linalg.norm(r)), 1e-300)
         residual = np.inf
         if not self._lu_only:
             x, residual = _refined(self._symmetric, sp.triu(K, format="csr"), K, r, norm_r)
-        if not residual <= 1e-6:  # also NaN
-            if not self._lu_only:
+            self._misses = 0 if residual <= 1e-6 else self._misses + 1
+            if self._misses:
+                self._lu_only = self._misses >= self.LU_AFTER
                 log.debug("PARDISO symmetric mode: relative residual %.1e; unsymmetric LU "
-                          "from now on", residual)
-            self._lu_only = True
+                          "%s", residual, "from now on" if self._lu_only else "for this one")
+        if not residual <= 1e-6:  # also NaN
+            self.lu_solves += 1
             x, residual = _refined(self._general, K, K, r, norm_r)
         if not residual <= 1e-6:
             raise ConvergenceError(
