@@ -33,6 +33,7 @@ BAD = [
     (["hemidisk", "--beta", "0", "--contact", "noslip", "--mesh-size", "0.3"], "infeasible"),
     (["study", "hemidisk-sector", "--workers", "0"], "workers"),
     (["study", "hemidisk-sector", "--alphas", "200"], "alpha"),
+    (["study", "hemidisk-sector", "--rim-mesh-size", "0"], "rim mesh size"),
     (["brain", "--flap", "custom"], "flap-centre"),
     (["brain", "--swelling", "3"], "swelling"),
     (["brain", "--steps", "0"], "steps"),
@@ -113,3 +114,17 @@ def test_readme_python_example() -> None:
     text = (ROOT / "README.md").read_text()
     code = re.search(r"## Python API\s+```python\n(.*?)```", text, re.S).group(1)
     exec(compile(code, "README.md", "exec"), {})
+
+
+def test_study_passes_mesh_sizes_to_its_scenarios() -> None:
+    from brainbulge.cli import build_parser
+    from brainbulge.cli.study import scenarios_for
+
+    argv = ["study", "hemidisk-sector", "--mesh-size", "0.1", "--corner-mesh-size", "0.02",
+            "--rim-mesh-size", "0.003", "--out", "x"]
+    sc = scenarios_for("hemidisk-sector", build_parser().parse_args(argv))
+    assert len(sc) == 32
+    assert all((s["mesh_size"], s["corner_mesh_size"], s["rim_mesh_size"]) == (0.1, 0.02, 0.003)
+               for s in sc)
+    plain = scenarios_for("hemidisk-disk", build_parser().parse_args(["study", "hemidisk-disk"]))
+    assert all("rim_mesh_size" not in s for s in plain)  # defaults stay the case's own

@@ -26,6 +26,10 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--workers", type=int, default=None, help="local worker processes")
     p.add_argument("--mesh-size", type=float, default=0.05, help="element size [units of R]")
+    p.add_argument("--corner-mesh-size", type=float, default=None,
+                   help="element size at the singular points [units of R] (default h/5)")
+    p.add_argument("--rim-mesh-size", type=float, default=None,
+                   help="element size on the edge-exclusion circles [units of R] (default h/10)")
     p.add_argument("--tets", type=int, default=30_000,
                    help="brain mesh size in tets (craniectomy study)")
     p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
@@ -51,6 +55,9 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
             tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps
         )
     common = {"mesh_size": args.mesh_size, "steps": args.steps}
+    for key in ("corner_mesh_size", "rim_mesh_size"):  # only when given: a rerun of an
+        if getattr(args, key) is not None:  # older study folder keeps its scenarios
+            common[key] = getattr(args, key)
     if name == "hemidisk-sector":
         return hd.sector_scenarios(
             alphas=args.alphas or hd.SECTOR_ALPHAS, betas=args.betas or hd.SECTOR_BETAS, **common
