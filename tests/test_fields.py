@@ -7,7 +7,9 @@ import pytest
 
 from brainbulge.results.fields import (
     max_principal_strain,
+    output_fields,
     radial_directions,
+    sample,
     stretch_along,
     tangential_stretch,
 )
@@ -71,3 +73,26 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
                 "raw_max_radial_stretch", "max_displacement", "integral_J_minus_Js",
                 "swelling_volume", "max_abs_J_minus_Js", "argmax_radial_stretch"):
         assert chunked[key] == pytest.approx(whole[key], rel=1e-12, abs=1e-15), key
+
+
+def test_argmax_locations_carry_their_maxima_outside_the_exclusion_disks() -> None:
+    """Each ``argmax_*`` is where its ``max_*`` is: the field evaluated afresh at that point
+    gives the reported maximum, and the point lies outside every edge-exclusion disk."""
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.results.summary import solution_summary
+    from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
+    corners = case.geometry.singular_points()
+    form = MixedForm(hemidisk_problem(case))
+    solver = NewtonSolver(form, SolverOptions(steps=2))
+    sol = solver.solve()
+    assert sol.converged
+    s = solution_summary(sol, solver, np.zeros(2), corners, case.edge_exclusion)
+    for stem, field in (("radial_stretch", "lambda_n"), ("tangential_stretch", "lambda_t"),
+                        ("principal_strain", "max_principal_strain")):
+        X = np.array(s[f"argmax_{stem}"])
+        assert min(np.linalg.norm(X - np.array(c)) for c in corners) > case.edge_exclusion
+        value = output_fields(sample(form, form.mesh(*X)), np.zeros(2))[field]
+        assert float(np.ravel(value)[0]) == pytest.approx(s[f"max_{stem}"], rel=1e-9), stem
+        assert s[f"max_{stem}"] < s[f"raw_max_{stem}"]  # the excluded corners peak higher
