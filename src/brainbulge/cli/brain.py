@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, positive_float, start_run
-from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
+from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
 
 
 def add_parser(sub: Any) -> None:

@@ -10,47 +10,46 @@ Pipeline::
     phi, grad = mesh.skull("left").signed_distance(points_mm)
 """
 
-from brainbulge.geometry.brain.boundaries import (
-    Flap,
-    custom_flap,
-    frontal_flap,
-    unilateral_flap,
-)
-from brainbulge.geometry.brain.brain_mesh import BrainMesh, build_brain_mesh, check_brain_mesh
-from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
-from brainbulge.geometry.brain.export import brain_summary, load_brain_mesh, save_brain_mesh
-from brainbulge.geometry.brain.labels import (
-    LABEL_MAP_PRESETS,
-    TISSUES,
-    TissueImage,
-    load_tissue_image,
-    tissue_image_from_labels,
-)
-from brainbulge.geometry.brain.ngsolve_mesh import to_ngsolve
-from brainbulge.geometry.brain.regions import MidSagittalPlane
-from brainbulge.geometry.brain.skull import RigidSkull
-from brainbulge.geometry.brain.template import icbm152_tissue_image
+import importlib
+from typing import Any
 
-__all__ = [
-    "LABEL_MAP_PRESETS",
-    "TISSUES",
-    "BrainMesh",
-    "Flap",
-    "IntracranialEnvelope",
-    "MidSagittalPlane",
-    "RigidSkull",
-    "TissueImage",
-    "brain_summary",
-    "build_brain_mesh",
-    "check_brain_mesh",
-    "custom_flap",
-    "frontal_flap",
-    "icbm152_tissue_image",
-    "intracranial_envelope",
-    "load_brain_mesh",
-    "load_tissue_image",
-    "save_brain_mesh",
-    "tissue_image_from_labels",
-    "to_ngsolve",
-    "unilateral_flap",
-]
+#: public name -> submodule; loaded on first use (PEP 562), so that importing a light
+#: submodule (e.g. ``defaults`` for the CLI's parser) does not pull in scipy.ndimage and the
+#: meshing stack: every ``brainbulge`` command paid ~0.3 s for it
+_WHERE = {
+    "Flap": "boundaries",
+    "custom_flap": "boundaries",
+    "frontal_flap": "boundaries",
+    "unilateral_flap": "boundaries",
+    "BrainMesh": "brain_mesh",
+    "build_brain_mesh": "brain_mesh",
+    "check_brain_mesh": "brain_mesh",
+    "IntracranialEnvelope": "envelope",
+    "intracranial_envelope": "envelope",
+    "brain_summary": "export",
+    "load_brain_mesh": "export",
+    "save_brain_mesh": "export",
+    "LABEL_MAP_PRESETS": "labels",
+    "TISSUES": "labels",
+    "TissueImage": "labels",
+    "load_tissue_image": "labels",
+    "tissue_image_from_labels": "labels",
+    "to_ngsolve": "ngsolve_mesh",
+    "MidSagittalPlane": "regions",
+    "RigidSkull": "skull",
+    "icbm152_tissue_image": "template",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_WHERE])
