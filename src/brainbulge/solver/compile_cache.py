@@ -49,11 +49,11 @@ def use_compiler_cache() -> bool:
     ccache = find_ccache()
     if ccache is None:
         return False
-    shims = cache_root() / "ccache-shims"
     path = os.environ.get("PATH", "").split(os.pathsep)
-    if str(shims) in path:
-        return True
     try:
+        shims = cache_root() / "ccache-shims"
+        if str(shims) in path:
+            return True
         shims.mkdir(parents=True, exist_ok=True)
         for name in COMPILERS:
             link = shims / name
@@ -62,7 +62,7 @@ def use_compiler_cache() -> bool:
                 tmp.unlink(missing_ok=True)
                 tmp.symlink_to(ccache)
                 os.replace(tmp, link)
-    except OSError as exc:  # a read-only home, no symlinks: compile without the cache
+    except (OSError, RuntimeError) as exc:  # no home, read-only, no symlinks: no cache
         log.debug("no compiler cache (%s)", exc)
         return False
     os.environ.setdefault("CCACHE_DIR", str(cache_root() / "ccache"))
