@@ -173,6 +173,44 @@ def test_energy_compiled_to_machine_code_gives_the_same_residual_and_tangent() -
     np.testing.assert_allclose(K1, K0, rtol=1e-9, atol=1e-12 * np.abs(K0).max())
 
 
+@pytest.mark.parametrize("element,native", [("taylor-hood", False), ("mini", False),
+                                            ("mini", True)])
+def test_energy_split_per_pressure_zone_gives_the_same_residual_and_tangent(
+        element, native, monkeypatch) -> None:
+    """``sum_z int_z psi + p_z (J - Js)`` (faster to differentiate) is the one-expression
+    energy ``int psi + (sum_z p_z)(J - Js)``: same residual and tangent, interpreted or
+    compiled."""
+    from brainbulge.geometry.inclusion import inclusion_mesh
+    from brainbulge.solver import mixed
+
+    mesh = inclusion_mesh(3, A=0.3, h=0.4, h_inclusion=0.2)
+    problem = Problem(mesh, {"inclusion": MooneyRivlin(0.03, 33.3),
+                             "matrix": MooneyRivlin(0.28, 333.0)}, {"inclusion": 1.2},
+                      clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"})
+    out = []
+    for split in (False, True):
+        monkeypatch.setattr(mixed, "split_energy", lambda *a, _s=split: _s)
+        form = MixedForm(problem, element=element, compile_energy=native and split)
+        assert form.split_zones == split and len(form.pressure_zones) == 2
+        form.set_load(0.8)
+        x = form.gfu.vec
+        x.FV().NumPy()[:] = np.random.default_rng(0).normal(scale=1e-3, size=len(x))
+        ns = NewtonSolver(form)
+        out.append((ns.residual(x), ns.tangent(x).toarray()))
+    (r0, K0), (r1, K1) = out
+    np.testing.assert_allclose(r1, r0, rtol=1e-9, atol=1e-12 * np.abs(r0).max())
+    np.testing.assert_allclose(K1, K0, rtol=1e-9, atol=1e-12 * np.abs(K0).max())
+
+
+def test_when_the_energy_is_split() -> None:
+    from brainbulge.solver.mixed import SPLIT_MIN_ELEMENTS, split_energy
+
+    assert not split_energy(10**6, 1, native=False)  # one zone: nothing to split
+    assert split_energy(100, 2, native=False)  # interpreted: always
+    assert not split_energy(SPLIT_MIN_ELEMENTS - 1, 4, native=True)  # compiling 4x costs more
+    assert split_energy(SPLIT_MIN_ELEMENTS, 4, native=True)
+
+
 def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
     """Below full load Newton stops at ``intermediate_tolerance``, at full load at
     ``tolerance``: fewer iterations, the same final state (hyperelastic: path independent)."""
