@@ -149,32 +149,6 @@ def test_rigid_skull_signed_distance(synthetic_mesh) -> None:
     assert np.abs(fd - skull.signed_distance(x)[1]).max() < 0.1
 
 
-def test_skull_spline_value_and_exact_gradient() -> None:
-    """The one-gather spline kernel is ndimage's cubic spline (to rounding, also where the
-    stencil leaves the grid) and its gradient the spline's derivative (central differences
-    of ndimage's spline agree to their own truncation error, ~1e-8 here)."""
-    import scipy.ndimage as ndi
-
-    from brainbulge.geometry.brain.skull import cubic_spline_value_and_gradient
-
-    rng = np.random.default_rng(0)
-    coeffs = ndi.spline_filter(ndi.gaussian_filter(rng.standard_normal((20, 24, 18)), 2),
-                               order=3, mode="nearest")
-    ijk = rng.uniform(-2.0, 21.0, size=(2000, 3))
-
-    def spline(x: np.ndarray) -> np.ndarray:
-        return ndi.map_coordinates(coeffs, x.T, order=3, mode="nearest", prefilter=False)
-
-    value, grad = cubic_spline_value_and_gradient(coeffs, ijk)
-    assert np.abs(value - spline(ijk)).max() < 1e-12 * np.abs(value).max()
-    inside = np.all((ijk > 2) & (ijk < np.array(coeffs.shape) - 3), axis=1)
-    h = 1e-4
-    fd = np.stack([(spline(ijk + h * e) - spline(ijk - h * e)) / (2 * h) for e in np.eye(3)],
-                  axis=1)
-    assert np.abs(grad - fd)[inside].max() < 1e-6 * np.abs(grad).max()
-    assert inside.sum() > 500
-
-
 def test_flap_removes_obstacle_with_rounded_edge(synthetic_mesh) -> None:
     flap: Flap = synthetic_mesh.flaps["left"]
     skull = synthetic_mesh.skull("left", edge_radius_mm=3.0)

@@ -37,14 +37,25 @@ class RigidSkull:
 
     def envelope_distance(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance to the intact skull's inner surface (mm, positive outside) and
-        its gradient (n, 3): the C2 cubic spline of the sampled distance and its exact
-        derivative."""
-        ijk = points_mm @ self._inv[:3, :3].T + self._inv[:3, 3]
-        phi, g_index = cubic_spline_value_and_gradient(self._coeffs, ijk)
+        its gradient (n, 3)."""
+        ijk = (points_mm @ self._inv[:3, :3].T + self._inv[:3, 3]).T
+
+        def spline(at: np.ndarray) -> np.ndarray:
+            return ndi.map_coordinates(self._coeffs, at, order=3, mode="nearest",
+                                       prefilter=False)
+
+        phi = spline(ijk)
+        # gradient of the same C2 spline (central differences, step 1e-3 voxel), so that
+        # contact's Newton sees the derivative of the gap it evaluates
+        g_index = np.empty((ijk.shape[1], 3))
+        for k in range(3):
+            e = np.zeros((3, 1))
+            e[k] = 1e-3
+            g_index[:, k] = (spline(ijk + e) - spline(ijk - e)) / 2e-3
         grad = g_index @ self._inv[:3, :3]
         # outside the grid: add the distance to it
         shape = np.array(self.envelope.sdf_mm.shape) - 1
-        beyond = np.maximum(-ijk, 0) + np.maximum(ijk - shape, 0)
+        beyond = np.maximum(-ijk.T, 0) + np.maximum(ijk.T - shape, 0)
         spacing = np.linalg.norm(self.envelope.affine[:3, :3], axis=0)
         phi = phi + np.linalg.norm(beyond * spacing, axis=1)
         return phi, grad
@@ -77,44 +88,3 @@ class RigidSkull:
         positive in the intracranial space or the flap opening) and ``grad g = -grad phi``."""
         phi, grad = self.signed_distance(x)
         return -phi, -grad
-
-
-def cubic_spline_value_and_gradient(coeffs: np.ndarray,
-                                    ijk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Value and gradient (per index unit) of the 3D cubic B-spline with coefficients
-    ``coeffs`` (``scipy.ndimage.spline_filter(..., order=3)``) at index points ``ijk`` (n, 3):
-
-        f(x) = sum_abc c[i0+a, j0+b, k0+c] w_a(tx) w_b(ty) w_c(tz),   i0 = floor(x) - 1,
-
-    with the cubic B-spline weights ``w`` of the fractional parts ``t`` and, for the gradient,
-    their derivatives (coefficient indices clamped to the grid, as ``mode="nearest"``).
-
-    ``scipy.ndimage.map_coordinates`` gives the value only (the gradient took six more calls
-    of central differences) and ``scipy.interpolate.NdBSpline`` one derivative per call; the
-    64 coefficients of a point are gathered once here for the value and all three
-    derivatives, which is what the contact's every residual needs.
-    """
-    ijk = np.asarray(ijk, dtype=float)
-    base = np.floor(ijk)
-    t = ijk - base
-    s = 1.0 - t
-    # (n, 3, 4) weights of the four coefficients around each point, and their derivatives
-    w = np.stack([s**3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3],
-                 axis=-1) / 6
-    dw = np.stack([-(s**2), 3 * t**2 - 4 * t, -3 * t**2 + 2 * t + 1, t**2], axis=-1) / 2
-    shape = np.array(coeffs.shape)
-    idx = np.clip(base.astype(np.int64)[:, :, None] - 1 + np.arange(4), 0,
-                  (shape - 1)[None, :, None])  # (n, 3, 4)
-    flat = ((idx[:, 0, :, None, None] * shape[1] + idx[:, 1, None, :, None]) * shape[2]
-            + idx[:, 2, None, None, :])
-    c = coeffs.reshape(-1)[flat]  # (n, 4, 4, 4)
-    cz = np.einsum("nabc,nc->nab", c, w[:, 2])
-    dcz = np.einsum("nabc,nc->nab", c, dw[:, 2])
-    cyz = np.einsum("nab,nb->na", cz, w[:, 1])
-    value = np.einsum("na,na->n", cyz, w[:, 0])
-    grad = np.stack([
-        np.einsum("na,na->n", cyz, dw[:, 0]),
-        np.einsum("nab,nb,na->n", cz, dw[:, 1], w[:, 0]),
-        np.einsum("nab,nb,na->n", dcz, w[:, 1], w[:, 0]),
-    ], axis=1)
-    return value, grad
