@@ -270,8 +270,9 @@ def split_energy(elements: int, zones: int, native: bool) -> bool:
     NGSolve's ``Variation`` differentiates the energy twice with respect to every trial
     function it references: nine components of ``Grad u`` and one pressure per zone. Its
     tangent costs about the square of that count, so with the brain's four zones (13
-    variables against 10 per zone) one expression took 2.78 s per tangent and the split
-    1.98 s (111k tets, compiled). Each split expression is compiled on its own, though
+    variables against 10 per zone) one expression took 42.6 s per tangent and the split
+    31.8 s (1.54M tets, compiled; 2D hemidisk, interpreted: 72 -> 59 ms at 15k DOFs). Each
+    split expression is compiled on its own, though
     (~6 s each without a cache hit, ~1.5 s with one), which pays only on large meshes; the
     interpreted (2D) energy has nothing to compile and is always split.
     """
