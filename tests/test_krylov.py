@@ -156,13 +156,8 @@ def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
     K2 = ns.tangent(x)
     x.FV().NumPy()[:] = saved
     assert abs(K2 - K1).max() > 1e-3 * abs(K1).max()
-    A_u1, S_1 = solver._amg_u.ml.levels[0].A, solver._amg_p.ml.levels[0].A
     x3 = solver.solve(K2, r1)
     assert solver.stats.setups == 1
-    # the displacement block's finest level follows the new tangent, the Schur
-    # approximation stays as set up (rebuilding it cost more than its staleness)
-    assert abs(solver._amg_u.ml.levels[0].A - A_u1).max() > 1e-3 * abs(A_u1).max()
-    assert solver._amg_p.ml.levels[0].A is S_1
     for K, r, sol in ((K1, r2, x2), (K2, r1, x3)):
         ref = _direct(K, r)
         assert np.linalg.norm(sol - ref) <= 1e-6 * np.linalg.norm(ref)

@@ -26,10 +26,9 @@ to 6.2, the small ones in CSF and gray-matter interface modes. ``method="minres"
 diagonal ``diag(A~, S~)``) needs an SPD ``A~``: pass ``reference=reference_stiffness(form)``.
 
 The AMG hierarchies are set up once (``setup``) and reused across Newton iterations: only the
-displacement block's finest level matrix and smoother are refreshed (the Schur approximation
-stays as set up, see :meth:`BlockKrylovSolver._update`); everything is rebuilt when a solve
-takes more than ``refresh_factor`` times the iterations of the first solve after the last
-set-up, after a failed solve, or on request (``refresh()``). Every solve checks the true residual
+finest level's matrix and smoother are refreshed; everything is rebuilt when a solve takes more
+than ``refresh_factor`` times the iterations of the first solve after the last set-up, after a
+failed solve, or on request (``refresh()``). Every solve checks the true residual
 ``|rhs - K x| / |rhs|`` and raises :class:`ConvergenceError` if it is above ``rtol``.
 
 Both Krylov methods are written here rather than taken from SciPy: SciPy's ``minres`` stops
@@ -487,10 +486,8 @@ class BlockKrylovSolver:
         A, Bt, C = self._blocks(K)
         if self.reference is None:
             self._amg_u.update(A)
-        # the Schur approximation's hierarchy is kept as set up, finest level included:
-        # rebuilding S~ for every tangent cost 10 s per solve at 1.54M tets (sparse products
-        # B^T diag(A)^-1 B), and on the 111k-tet scenario the stale S~ cost 6 % more GMRES
-        # iterations (366 against 345) but 24 % less linear-solve time
+        if self.schur == "simple":
+            self._amg_p.update(self._schur_simple(A, Bt, C))
         return A, Bt, C
 
     # --- preconditioner ------------------------------------------------------------------
