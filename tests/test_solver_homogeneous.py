@@ -147,30 +147,36 @@ def test_closed_domain_without_swelling_is_fine(box2d) -> None:
     assert solve(problem).converged
 
 
-def test_energy_compiled_to_machine_code_gives_the_same_residual_and_tangent() -> None:
-    """``compile_energy=True`` (on for brain cases) changes the speed, not the numbers."""
-    import numpy as np
-
+def _two_zone_inclusion() -> Problem:
+    """Octant of a ball with a swelling soft inclusion: two pressure zones."""
     from brainbulge.geometry.inclusion import inclusion_mesh
-    from brainbulge.materials import MooneyRivlin
-    from brainbulge.model import Problem
-    from brainbulge.solver import MixedForm, NewtonSolver
 
     mesh = inclusion_mesh(3, A=0.3, h=0.4, h_inclusion=0.2)
-    problem = Problem(mesh, {"inclusion": MooneyRivlin(0.03, 33.3),
-                             "matrix": MooneyRivlin(0.28, 333.0)}, {"inclusion": 1.2},
-                      clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"})
-    out = []
-    for native in (False, True):
-        form = MixedForm(problem, element="mini", compile_energy=native)
-        form.set_load(0.8)
-        x = form.gfu.vec
-        x.FV().NumPy()[:] = np.random.default_rng(0).normal(scale=1e-3, size=len(x))
-        ns = NewtonSolver(form)
-        out.append((ns.residual(x), ns.tangent(x).toarray()))
-    (r0, K0), (r1, K1) = out
-    np.testing.assert_allclose(r1, r0, rtol=1e-9, atol=1e-12 * np.abs(r0).max())
-    np.testing.assert_allclose(K1, K0, rtol=1e-9, atol=1e-12 * np.abs(K0).max())
+    return Problem(mesh, {"inclusion": MooneyRivlin(0.03, 33.3),
+                          "matrix": MooneyRivlin(0.28, 333.0)}, {"inclusion": 1.2},
+                   clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"})
+
+
+def _residual_and_tangent(form: MixedForm) -> tuple[np.ndarray, np.ndarray]:
+    """Residual and dense tangent at a fixed random state at load 0.8."""
+    form.set_load(0.8)
+    x = form.gfu.vec
+    x.FV().NumPy()[:] = np.random.default_rng(0).normal(scale=1e-3, size=len(x))
+    ns = NewtonSolver(form)
+    return ns.residual(x), ns.tangent(x).toarray()
+
+
+def _assert_same(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> None:
+    for u, v in zip(a, b, strict=True):
+        np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12 * np.abs(u).max())
+
+
+def test_energy_compiled_to_machine_code_gives_the_same_residual_and_tangent() -> None:
+    """``compile_energy=True`` (on for brain cases) changes the speed, not the numbers."""
+    problem = _two_zone_inclusion()
+    _assert_same(*(_residual_and_tangent(MixedForm(problem, element="mini",
+                                                   compile_energy=native))
+                   for native in (False, True)))
 
 
 @pytest.mark.parametrize("element,native", [("taylor-hood", False), ("mini", False),
@@ -180,26 +186,16 @@ def test_energy_split_per_pressure_zone_gives_the_same_residual_and_tangent(
     """``sum_z int_z psi + p_z (J - Js)`` (faster to differentiate) is the one-expression
     energy ``int psi + (sum_z p_z)(J - Js)``: same residual and tangent, interpreted or
     compiled."""
-    from brainbulge.geometry.inclusion import inclusion_mesh
     from brainbulge.solver import mixed
 
-    mesh = inclusion_mesh(3, A=0.3, h=0.4, h_inclusion=0.2)
-    problem = Problem(mesh, {"inclusion": MooneyRivlin(0.03, 33.3),
-                             "matrix": MooneyRivlin(0.28, 333.0)}, {"inclusion": 1.2},
-                      clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"})
+    problem = _two_zone_inclusion()
     out = []
     for split in (False, True):
         monkeypatch.setattr(mixed, "split_energy", lambda *a, _s=split: _s)
         form = MixedForm(problem, element=element, compile_energy=native and split)
         assert form.split_zones == split and len(form.pressure_zones) == 2
-        form.set_load(0.8)
-        x = form.gfu.vec
-        x.FV().NumPy()[:] = np.random.default_rng(0).normal(scale=1e-3, size=len(x))
-        ns = NewtonSolver(form)
-        out.append((ns.residual(x), ns.tangent(x).toarray()))
-    (r0, K0), (r1, K1) = out
-    np.testing.assert_allclose(r1, r0, rtol=1e-9, atol=1e-12 * np.abs(r0).max())
-    np.testing.assert_allclose(K1, K0, rtol=1e-9, atol=1e-12 * np.abs(K0).max())
+        out.append(_residual_and_tangent(form))
+    _assert_same(*out)
 
 
 def test_when_the_energy_is_split() -> None:
