@@ -249,3 +249,27 @@ def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_pa
     assert s["converged"] and s["load_steps"] == 2
     assert loads[0] == pytest.approx(1.0)  # load 0.5 came from the file
     assert not (tmp_path / "restart.npz").exists()
+
+
+def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_path) -> None:
+    """A coarse mesh of the same labels solved first: the fine mesh's Newton, started at
+    full load from its solution, converges in one step to the ramp's state up to the
+    non-uniqueness of frictionless contact on a curved skull: both are equilibria, the
+    sequenced one here with a few contact points lifted off by <= 0.25 mm instead of resting
+    at zero pressure, and 1.2 % less strain energy (docs/performance.md)."""
+    image = tissue_image_from_labels(*symmetric_labels(), "freesurfer")
+    coarse = build_brain_mesh(image, target_tets=2000, midsagittal=MidSagittalPlane())
+    assert len(coarse.tets) < 0.6 * len(symmetric_brain.tets)
+    s = run_brain({"flap": "frontal", "swell": "left", "steps": 2}, tmp_path,
+                  brain_mesh=symmetric_brain, coarse_brain_mesh=coarse)
+    ramp = shifts["left"]
+    seq = s["mesh_sequencing"]
+    assert seq["coarse_converged"] and seq["fine_converged"]
+    assert seq["coarse_elements"] == len(coarse.tets)
+    assert s["converged"] and s["load_steps"] == 1
+    assert s["newton_iterations"] <= ramp["newton_iterations"]
+    for key in ("midline_shift_mm", "bulge_volume_ml", "max_displacement", "max_pressure_kpa"):
+        assert s[key] == pytest.approx(ramp[key], rel=0.03), key
+    assert s["max_penetration_mm"] < 1e-3
+    assert abs(s["integral_J_minus_Js"]) < 1e-6 * s["brain_volume_ml"] * 1000
+    assert ramp["mesh_sequencing"] is None

@@ -50,6 +50,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--element", choices=("mini", "taylor-hood"), default="mini")
     p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="pardiso",
                    help="direct, or GMRES with AMG blocks for large meshes (MINI)")
+    p.add_argument("--coarse-tets", type=int, default=None,
+                   help="mesh sequencing: solve first on a mesh of about this many tets, then "
+                   "finish on the fine mesh from its solution (MINI; e.g. tets / 14 for "
+                   "meshes of a million tets and more)")
+    p.add_argument("--coarse-mesh", default=None,
+                   help="mesh sequencing with this brain.npz as the coarse mesh (with --mesh)")
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")
     p.add_argument("--edge-exclusion", type=float, default=5.0,
                    help="band around the flap rim left out of max_*/min_* [mm]")
@@ -78,6 +84,8 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "material": args.material,
         "edge_exclusion_mm": args.edge_exclusion,
         "edge_radius_mm": args.skull_edge_radius,
+        "coarse_tets": args.coarse_tets,
+        "coarse_mesh": args.coarse_mesh,
     }
 
 

@@ -65,14 +65,14 @@ def triangle_quality(x: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 def vertex_values(mesh: ngs.Mesh, cf: ngs.CoefficientFunction, X: np.ndarray,
                   inward: np.ndarray | None = None) -> np.ndarray:
-    """``cf`` at reference points ``X`` (n, 2); a point outside the mesh (a straight-sided
+    """``cf`` at reference points ``X`` (n, dim); a point outside the mesh (a straight-sided
     mesh misses slivers of a curved boundary) is moved towards its point of ``inward`` until
     it is found, else its row is NaN."""
     vals = np.full((len(X), cf.dim), np.nan)
     todo = np.arange(len(X))
-    for s in (0.0, 1e-6, 1e-4, 1e-3, 1e-2, 0.1) if inward is not None else (0.0,):
+    for s in (0.0, 1e-6, 1e-4, 1e-3, 1e-2, 0.1, 0.3, 0.6, 0.9) if inward is not None else (0.0,):
         P = X[todo] if s == 0 else X[todo] + s * (inward[todo] - X[todo])
-        mips = mesh(P[:, 0], P[:, 1])
+        mips = mesh(*P.T)
         inside = mips["nr"] >= 0
         if np.any(inside):
             vals[todo[inside]] = np.asarray(cf(mips[inside]), dtype=float).reshape(-1, cf.dim)

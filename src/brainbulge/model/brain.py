@@ -12,7 +12,7 @@ hemisphere, the right, or both.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +60,10 @@ class CraniectomyCase:
         compile: compile the energy to machine code (a one-off ~10 s; assembly ~3.5x faster).
         edge_radius_mm: radius of the rounded cut edge of the skull at the flap [mm].
         edge_exclusion_mm: band around the flap rim left out of ``max_*`` outputs [mm].
+        coarse_tets: mesh sequencing (:mod:`brainbulge.solver.sequencing`): ramp the load
+            first on a mesh of about this many tets of the same geometry, then start the fine
+            mesh's Newton at full load from its solution (MINI only; fewer fine iterations).
+        coarse_mesh: the same with a ``brain.npz`` as the coarse mesh (with ``mesh``).
         name: label of the scenario.
     """
 
@@ -81,6 +85,8 @@ class CraniectomyCase:
     compile: bool = True
     edge_radius_mm: float = EDGE_RADIUS_MM
     edge_exclusion_mm: float = 5.0
+    coarse_tets: int | None = None
+    coarse_mesh: str | None = None
     name: str = ""
     extra: dict = field(default_factory=dict)
 
@@ -123,10 +129,31 @@ class CraniectomyCase:
                 raise InputError(
                     f"--mesh fixes the geometry, so {', '.join(given)} would be ignored; drop "
                     "them, or build a mesh with them by `brainbulge mesh` and pass that")
+        self._check_sequencing()
         if self.fibres is not None and not Path(self.fibres).is_file():
             raise InputError(f"fibre image {self.fibres} does not exist")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
+
+
+    def _check_sequencing(self) -> None:
+        if self.coarse_tets is None and self.coarse_mesh is None:
+            return
+        if self.element != "mini":
+            raise InputError("mesh sequencing (--coarse-tets, --coarse-mesh) needs --element "
+                             "mini")
+        if self.coarse_tets is not None and self.coarse_mesh is not None:
+            raise InputError("give --coarse-tets or --coarse-mesh, not both")
+        if self.coarse_mesh is not None and not Path(self.coarse_mesh).exists():
+            raise InputError(f"coarse brain mesh {self.coarse_mesh} does not exist; build one "
+                             "with `brainbulge mesh --tets N --out DIR` and pass DIR/brain.npz")
+        if self.coarse_tets is not None:
+            if self.mesh is not None:
+                raise InputError("--coarse-tets builds the coarse mesh from the geometry "
+                                 "inputs, which --mesh fixes: pass --coarse-mesh instead")
+            if not (isinstance(self.coarse_tets, int) and 1_000 <= self.coarse_tets < self.tets):
+                raise InputError(f"coarse_tets = {self.coarse_tets!r} must be a whole number "
+                                 f"in [1000, tets = {self.tets})")
 
 
 def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
@@ -153,6 +180,17 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
                          f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
     return bm
+
+
+def coarse_brain_mesh_for(case: CraniectomyCase) -> BrainMesh | None:
+    """The coarse mesh of mesh sequencing (``coarse_tets`` or ``coarse_mesh``), or None."""
+    if case.coarse_tets is None and case.coarse_mesh is None:
+        return None
+    if case.coarse_mesh is not None:
+        coarse = replace(case, mesh=case.coarse_mesh, coarse_mesh=None)
+    else:
+        coarse = replace(case, tets=case.coarse_tets, coarse_tets=None)
+    return brain_mesh_for(coarse)
 
 
 def tissue_materials(material: str) -> dict[str, MooneyRivlin]:

@@ -548,7 +548,6 @@ class NewtonSolver:
         x_prev.data = x
         last_increment: ngs.BaseVector | None = None
         last_dt = 0.0
-        pen_tol = opt.penetration_tol * self.length
         if opt.checkpoint is not None:
             resumed = self._read_checkpoint(Path(opt.checkpoint), x, sol)
             if resumed is not None:
@@ -573,11 +572,9 @@ class NewtonSolver:
                     ok, its2, norm = self.newton(x)
                     its += its2
                 n_aug, pen = 0, 0.0
-                if ok and form.contacts_present:
-                    pen = self.max_penetration()
-                    if t + dt >= 1 - 1e-12 and form.contact_multipliers:  # final load only
-                        n_aug, its2, norm, pen = self.augment(x, pen, pen_tol)
-                        its += its2
+                if ok:
+                    n_aug, its2, norm, pen = self._penetration(x, norm, final)
+                    its += its2
                 if not ok:
                     sol.rejected_steps += 1
                     x.data = x_prev
@@ -622,6 +619,49 @@ class NewtonSolver:
             x.data = x_prev
             form.load.Set(t)
         sol.load = t
+        return self._timed(sol, start)
+
+    def equilibrate(self) -> Solution:
+        """Newton at the form's current load from its current state (one carried over from
+        another mesh, :mod:`brainbulge.solver.sequencing`), to the final tolerance, without
+        load steps. On failure the state is restored and ``converged`` is false."""
+        form = self.form
+        start = time.perf_counter()
+        t = float(form.load.Get())
+        sol = Solution(form=form, load=t, converged=False)
+        x = form.gfu.vec
+        x0 = x.CreateVector()
+        x0.data = x
+        lam0 = form.multiplier_state()
+        self.tolerance = self.opt.tolerance
+        ok, its, norm = self.newton(x)
+        if ok:
+            n_aug, its2, norm, pen = self._penetration(x, norm, final=t >= 1 - 1e-12)
+            sol.steps.append(StepRecord(t, its + its2, n_aug, norm, pen))
+            sol.converged = True
+        else:
+            x.data = x0
+            form.restore_multipliers(lam0)
+            sol.rejected_steps = 1
+            sol.message = (f"Newton did not converge at load {t:.4f} from the given state "
+                           f"(|R| = {norm:.2e} after {its} iterations)")
+        return self._timed(sol, start)
+
+    def _penetration(self, x: ngs.BaseVector, norm: float, final: bool
+                     ) -> tuple[int, int, float, float]:
+        """After a converged Newton solve: the largest penetration, and at full load the
+        augmentations of the symbolic contacts; returns (augmentations, their Newton
+        iterations, residual, penetration)."""
+        form = self.form
+        if not form.contacts_present:
+            return 0, 0, norm, 0.0
+        pen = self.max_penetration()
+        if final and form.contact_multipliers:
+            return self.augment(x, pen, self.opt.penetration_tol * self.length)
+        return 0, 0, norm, pen
+
+    def _timed(self, sol: Solution, start: float) -> Solution:
+        """``sol`` with the wall, assembly and linear-solve times and Krylov iterations."""
         sol.wall_time_s = time.perf_counter() - start
         sol.assembly_time_s = self.t_assembly
         sol.solve_time_s = self.t_solve

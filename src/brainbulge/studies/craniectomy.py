@@ -41,6 +41,7 @@ from brainbulge.model.brain import (
     CraniectomyCase,
     brain_mesh_for,
     brain_problem,
+    coarse_brain_mesh_for,
     white_matter_volume_ml,
 )
 from brainbulge.model.problem import case_from_config
@@ -60,6 +61,7 @@ from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.sequencing import solve_sequenced
 
 #: the parenchyma: where axons are and tissue extremes are taken
 PARENCHYMA = "(gray|white|cerebellum|brainstem)_(left|right)"
@@ -86,8 +88,12 @@ def run_brain(
     out_dir: Path,
     progress: bool = False,
     brain_mesh: BrainMesh | None = None,
+    coarse_brain_mesh: BrainMesh | None = None,
 ) -> dict[str, Any]:
-    """Solve one 3D scenario; write its files into ``out_dir``; return the summary."""
+    """Solve one 3D scenario; write its files into ``out_dir``; return the summary.
+
+    ``brain_mesh`` and ``coarse_brain_mesh`` (mesh sequencing) are used instead of loading or
+    building the case's meshes."""
     case = config if isinstance(config, CraniectomyCase) else case_from_dict(dict(config))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -95,21 +101,34 @@ def run_brain(
     problem = brain_problem(bm, case)
     form = MixedForm(problem, element=case.element, compile_energy=case.compile)
     restart = out_dir / "restart.npz"
-    inputs = {k: v for k, v in dataclasses.asdict(case).items() if k != "steps"}
+    inputs = {k: v for k, v in dataclasses.asdict(case).items()
+              if k not in ("steps", "coarse_tets", "coarse_mesh")}
     mesh_hash = hashlib.sha1(np.ascontiguousarray(bm.nodes_mm).tobytes()
                              + np.ascontiguousarray(bm.tets).tobytes()).hexdigest()
     key = json.dumps([inputs, mesh_hash], sort_keys=True, default=str)
-    solver = NewtonSolver(
-        form,
-        SolverOptions(steps=case.steps, progress=progress, linear_solver=case.linear_solver,
-                      checkpoint=restart, checkpoint_key=key),
-    )
-    sol = solver.solve()
+    options = SolverOptions(steps=case.steps, progress=progress,
+                            linear_solver=case.linear_solver, checkpoint=restart,
+                            checkpoint_key=key)
+    sequenced = None
+    if restart.is_file():  # an interrupted ramp on this mesh goes on where it stopped
+        coarse_bm = None
+    else:
+        coarse_bm = coarse_brain_mesh if coarse_brain_mesh is not None else (
+            coarse_brain_mesh_for(case))
+    if coarse_bm is not None:
+        coarse = MixedForm(brain_problem(coarse_bm, case), element=case.element,
+                           compile_energy=case.compile)
+        sol, solver, sequenced = solve_sequenced(coarse, form, options)
+        del coarse
+    else:
+        solver = NewtonSolver(form, options)
+        sol = solver.solve()
     solver.release_linear_solver()
     if sol.converged:
         restart.unlink(missing_ok=True)
     fibres = _fibres(case, bm)
     summary = brain_summary(case, bm, form, solver, sol, fibres)
+    summary["mesh_sequencing"] = None if sequenced is None else dataclasses.asdict(sequenced)
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)

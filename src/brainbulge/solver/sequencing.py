@@ -1,0 +1,177 @@
+"""Mesh sequencing (nested iteration): a coarse solution as the fine mesh's Newton start.
+
+On a fine mesh the load ramp spends its Newton iterations on the path, not on the resolution:
+the 1.54M-tet brain needs 15 iterations over three load steps at ~2 minutes each. The
+hyperelastic state at full load does not depend on the path, so the same state can be
+approached from a cheaper one: solve the same problem on a coarse mesh of the same domain
+(all load steps, seconds per iteration), carry the converged state ``(u, p, lambda)`` over
+to the fine mesh, and let Newton finish there at full load. How far that start is from the
+fine solution is set by the coarse mesh's discretisation error, not by the load increment.
+
+The carried-over state (:func:`interpolate_state`):
+
+- ``u`` at each fine vertex: the coarse ``u`` evaluated there (linear interpolation; a vertex
+  outside the coarse mesh, where the two meshes' curved boundaries differ, is moved towards
+  the centroid of one of its elements until it is found, else takes the nearest found value);
+- ``p`` per pressure zone at each vertex of the zone: the coarse ``p_z`` where the coarse
+  element found there belongs to the same zone, else the nearest coarse vertex of the zone
+  (the pressure jumps across zones, and the two meshes' zone interfaces differ);
+- each contact point's pressure from the nearest coarse contact point (deformed positions),
+  and the points that carry pressure are moved along the obstacle's normal onto it,
+  ``u_i <- u_i - g_i n_i`` (the two meshes' boundaries differ by up to ~1 mm on the brain).
+
+If Newton does not converge from that start, the fine mesh ramps the load from ``Js = 1``
+as without sequencing: sequencing never ends a run that the plain ramp would finish.
+
+P1-based displacements (MINI) only: the vertex values are all the state there is (the
+bubbles are condensed). Written by hand: NGSolve interpolates between meshes only of one
+refinement hierarchy, and neither meshio nor pyvista carries a mixed state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import ngsolve as ngs
+import numpy as np
+from scipy.spatial import cKDTree
+
+from brainbulge.errors import InputError
+from brainbulge.geometry.rezone import vertex_values
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
+
+log = logging.getLogger("brainbulge")
+
+
+@dataclasses.dataclass
+class Sequenced:
+    """What the coarse stage did (for the summary and the benchmark)."""
+
+    coarse_elements: int
+    coarse_converged: bool
+    coarse_newton_iterations: int
+    coarse_wall_time_s: float
+    transfer_time_s: float
+    initial_residual: float | None  # scaled |R| of the carried-over state (fine mesh)
+    fine_converged: bool  # Newton from the carried-over state (else the plain ramp ran)
+
+
+def _elements(mesh: ngs.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex numbers (n_el, dim + 1) and material index (n_el,) of the volume elements."""
+    els = list(mesh.Elements(ngs.VOL))
+    return (np.array([[v.nr for v in el.vertices] for el in els], dtype=np.int64),
+            np.array([el.index for el in els], dtype=np.int64))
+
+
+def _vertex_dofs(space: ngs.FESpace, vertices: np.ndarray, count: int) -> np.ndarray:
+    """(n, count) DOF numbers of ``space`` at ``vertices``."""
+    return np.array([space.GetDofNrs(ngs.NodeId(ngs.VERTEX, int(v)))[:count] for v in vertices],
+                    dtype=np.int64).reshape(len(vertices), count)
+
+
+def interpolate_state(old: MixedForm, new: MixedForm) -> None:
+    """Carry ``(u, p, lambda)`` and the load of ``old`` over to ``new``, a mesh of the same
+    reference domain (see the module docstring)."""
+    if new.element != "mini" or old.element != "mini":
+        raise InputError("mesh sequencing needs the MINI element (P1 + bubble / P1)")
+    if old.pressure_zones != new.pressure_zones:
+        raise InputError("mesh sequencing needs the same regions on both meshes "
+                         f"(zones {old.pressure_zones} and {new.pressure_zones})")
+    mesh, dim = new.mesh, new.dim
+    X = np.array([v.point for v in mesh.vertices])[:, :dim]
+    els, mat = _elements(mesh)
+    centroid = X[els].mean(axis=1)
+    inward = np.empty_like(X)
+    inward[els.ravel()] = np.repeat(centroid, dim + 1, axis=0)  # one element's centroid
+    u = vertex_values(old.mesh, old.u, X, inward=inward)
+    lost = ~np.isfinite(u[:, 0])
+    if lost.all():
+        raise InputError("the coarse and the fine mesh do not overlap")
+    if lost.any():
+        found = np.flatnonzero(~lost)
+        _, j = cKDTree(X[found]).query(X[lost])
+        u[lost] = u[found[j]]
+    gvec = new.gfu.vec.FV().NumPy()
+    gvec[:] = 0.0
+    V = new.fes.components[0]
+    uvec = new.u.vec.FV().NumPy()
+    uvec[_vertex_dofs(V, np.arange(mesh.nv), dim)] = u
+    X_old = np.array([v.point for v in old.mesh.vertices])[:, :dim]
+    els_old, mat_old = _elements(old.mesh)
+    for k, zone in enumerate(new.pressure_zones):
+        in_zone = np.array(mesh.Materials(zone).Mask(), dtype=bool)[mat]
+        in_zone_old = np.array(old.mesh.Materials(zone).Mask(), dtype=bool)[mat_old]
+        verts = np.unique(els[in_zone])
+        verts_old = np.unique(els_old[in_zone_old])
+        p_old = old.gfu.components[1 + k]
+        p_nodal = p_old.vec.FV().NumPy()[
+            _vertex_dofs(old.fes.components[1 + k], verts_old, 1)[:, 0]]
+        mips = old.mesh(*X[verts].T)
+        nr = mips["nr"]
+        same = (nr >= 0) & in_zone_old[np.maximum(nr, 0)]
+        p = np.empty(len(verts))
+        if same.any():
+            p[same] = np.asarray(p_old(mips[same]), dtype=float).ravel()
+        if (~same).any():
+            _, j = cKDTree(X_old[verts_old]).query(X[verts[~same]])
+            p[~same] = p_nodal[j]
+        pvec = new.gfu.components[1 + k].vec.FV().NumPy()
+        pvec[_vertex_dofs(new.fes.components[1 + k], verts, 1)[:, 0]] = p
+    carry_contact_pressures(old, new)
+    for pc in new.point_contacts:  # pressed points onto the obstacle
+        pc.update(gvec)
+        pressed = pc.lam > 0
+        gvec += pc.P.T @ (-(pc.g * pressed)[:, None] * pc.n).ravel()
+        pc.update(gvec)
+    new.set_load(old.load.Get())  # prescribed values exact again
+
+
+def carry_contact_pressures(old: MixedForm, new: MixedForm) -> None:
+    """Each of ``new``'s contact points takes the pressure of ``old``'s nearest one (at the
+    deformed positions of both states)."""
+    for pc_old, pc_new in zip(old.point_contacts, new.point_contacts, strict=True):
+        pc_old.update(old.gfu.vec.FV().NumPy())
+        pc_new.update(new.gfu.vec.FV().NumPy())
+        _, idx = cKDTree(pc_old.x).query(pc_new.x)
+        pc_new.lam = pc_old.lam[idx].copy()
+
+
+def solve_sequenced(
+    coarse: MixedForm, fine: MixedForm, options: SolverOptions
+) -> tuple[Solution, NewtonSolver, Sequenced]:
+    """Ramp the load on ``coarse``, carry its state to ``fine`` and converge there at full
+    load; if that fails, ramp on ``fine`` from ``Js = 1``. Returns the fine solution, its
+    solver and the coarse stage's record. ``options`` apply to both meshes (the coarse one
+    without restart file or progress bar)."""
+    t0 = time.perf_counter()
+    coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False)
+    coarse_solver = NewtonSolver(coarse, coarse_opt)
+    csol = coarse_solver.solve()
+    coarse_solver.release_linear_solver()
+    log.info("  coarse mesh (%d elements): load %.4f in %d Newton iterations, %.1f s",
+             coarse.mesh.ne, csol.load, csol.newton_iterations, csol.wall_time_s)
+    solver = NewtonSolver(fine, options)
+    record = Sequenced(coarse.mesh.ne, csol.converged, csol.newton_iterations,
+                       time.perf_counter() - t0, 0.0, None, False)
+    if csol.converged:
+        t1 = time.perf_counter()
+        interpolate_state(coarse, fine)
+        record.transfer_time_s = time.perf_counter() - t1
+        record.initial_residual = solver.scaled_norm(solver.residual(fine.gfu.vec))
+        sol = solver.equilibrate()
+        record.fine_converged = sol.converged
+        if sol.converged:
+            return sol, solver, record
+        log.warning("  the coarse solution did not converge on the fine mesh (%s); "
+                    "ramping the load there from Js = 1", sol.message)
+    else:
+        log.warning("  the coarse mesh stopped at load %.4f (%s); ramping the load on the "
+                    "fine mesh from Js = 1", csol.load, csol.message)
+    fine.gfu.vec[:] = 0.0
+    fine.restore_multipliers([np.zeros_like(v) for v in fine.multiplier_state()])
+    fine.set_load(0.0)
+    sol = solver.solve()
+    return sol, solver, record

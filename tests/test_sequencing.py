@@ -1,0 +1,155 @@
+"""Mesh sequencing (:mod:`brainbulge.solver.sequencing`) on the capped ball of
+test_point_contact: a swelling sphere in an incompressible ball octant sliding in a rigid
+spherical skull with polar openings, meshed twice (h = 0.3 and 0.15).
+
+- the carried-over state is exact where it can be: affine ``u`` and per-zone affine ``p`` at
+  fine vertices inside the coarse mesh (inside the same zone, for ``p``); contact pressures
+  from the nearest point; pressed points end on the obstacle;
+- Newton from the carried-over coarse solution reaches the fine ramp's state, in fewer fine
+  iterations; when it fails, the fine mesh ramps from Js = 1 and reaches it all the same.
+"""
+
+from __future__ import annotations
+
+import ngsolve as ngs
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from brainbulge.errors import InputError
+from brainbulge.solver import SolverOptions
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.newton import NewtonSolver, Solution
+from brainbulge.solver.sequencing import interpolate_state, solve_sequenced
+from test_point_contact import A, _capped_ball
+
+OPTIONS = SolverOptions(steps=2)
+
+
+def _forms(element: str = "mini") -> tuple[MixedForm, MixedForm]:
+    coarse = MixedForm(_capped_ball(h=0.3, h_inclusion=A / 2, cap_deg=35)[1], element=element)
+    fine = MixedForm(_capped_ball(h=0.15, h_inclusion=A / 3, cap_deg=35)[1], element=element)
+    return coarse, fine
+
+
+def _vertex_u(form: MixedForm) -> np.ndarray:
+    V = form.fes.components[0]
+    dofs = [V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v))[:3] for v in range(form.mesh.nv)]
+    return form.u.vec.FV().NumPy()[np.array(dofs)]
+
+
+def _zone_vertices(mesh: ngs.Mesh, zone: str) -> np.ndarray:
+    mask = mesh.Materials(zone).Mask()
+    return np.unique([v.nr for el in mesh.Elements(ngs.VOL) if mask[el.index]
+                      for v in el.vertices])
+
+
+def _coords(mesh: ngs.Mesh) -> np.ndarray:
+    return np.array([v.point for v in mesh.vertices])
+
+
+@pytest.fixture(scope="module")
+def ramp():
+    """The fine mesh's own load ramp (the reference)."""
+    _, fine = _forms()
+    solver = NewtonSolver(fine, OPTIONS)
+    sol = solver.solve()
+    assert sol.converged
+    return fine, sol
+
+
+def test_carried_state_is_exact_for_affine_fields() -> None:
+    coarse, fine = _forms()
+    for form in (coarse, fine):
+        form.mesh.Curve(1)  # straight elements: P1 interpolation of affine fields is exact
+    G = np.diag([0.01, -0.02, 0.03])  # u_i = 0 on the symmetry plane X_i = 0
+    Xc = _coords(coarse.mesh)
+    V = coarse.fes.components[0]
+    uvec = coarse.u.vec.FV().NumPy()
+    for v in range(coarse.mesh.nv):
+        uvec[list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v))[:3])] = G @ Xc[v]
+    slopes = {}
+    for k, zone in enumerate(coarse.pressure_zones):
+        a = np.array([1.0, -2.0, 0.5]) * (k + 1)
+        slopes[zone] = (k - 1.0, a)
+        Q = coarse.fes.components[1 + k]
+        pvec = coarse.gfu.components[1 + k].vec.FV().NumPy()
+        for v in _zone_vertices(coarse.mesh, zone):
+            pvec[Q.GetDofNrs(ngs.NodeId(ngs.VERTEX, int(v)))[0]] = k - 1.0 + a @ Xc[v]
+    pc_c = coarse.point_contacts[0]
+    pc_c.lam = np.zeros(pc_c.n_points)  # nothing pressed: no projection onto the skull
+    coarse.set_load(0.5)
+    interpolate_state(coarse, fine)
+
+    X = _coords(fine.mesh)
+    inside = coarse.mesh(*X.T)["nr"] >= 0
+    assert inside.mean() > 0.5
+    u = _vertex_u(fine)
+    assert np.abs(u[inside] - X[inside] @ G.T).max() < 1e-12
+    # vertices outside the coarse mesh (its chords miss slivers of the sphere) are found
+    # inwards, within a fine element: off by at most |G| h
+    assert np.abs(u - X @ G.T).max() < np.abs(G).max() * 0.15
+    for k, zone in enumerate(fine.pressure_zones):
+        Q = fine.fes.components[1 + k]
+        c0, a = slopes[zone]
+        verts = _zone_vertices(fine.mesh, zone)
+        p = fine.gfu.components[1 + k].vec.FV().NumPy()[
+            [Q.GetDofNrs(ngs.NodeId(ngs.VERTEX, int(v)))[0] for v in verts]]
+        err = np.abs(p - (c0 + X[verts] @ a))
+        nr = coarse.mesh(*X[verts].T)["nr"]
+        mask = coarse.mesh.Materials(zone).Mask()
+        zone_of = np.array([mask[el.index] for el in coarse.mesh.Elements(ngs.VOL)])
+        same = (nr >= 0) & zone_of[np.maximum(nr, 0)]
+        assert same.mean() > 0.3
+        assert err[same].max() < 1e-12  # in a coarse element of the zone: interpolated
+        assert err.max() < 0.3 * np.linalg.norm(a)  # else the nearest coarse zone vertex
+    assert fine.load.Get() == 0.5
+
+
+def test_contact_pressures_and_pressed_points() -> None:
+    coarse, fine = _forms()
+    solver = NewtonSolver(coarse, OPTIONS)
+    assert solver.solve().converged
+    interpolate_state(coarse, fine)
+    pc_c, pc_f = coarse.point_contacts[0], fine.point_contacts[0]
+    pc_f.update(fine.gfu.vec.FV().NumPy())
+    _, j = cKDTree(pc_c.x).query(pc_f.x)
+    assert np.array_equal(pc_f.lam, pc_c.lam[j])
+    pressed = pc_f.lam > 0
+    assert pressed.sum() > 10
+    assert np.abs(pc_f.g[pressed]).max() < 1e-4  # on the skull (radius 1)
+
+
+def test_sequenced_solve_reaches_the_fine_solution_in_fewer_iterations(ramp) -> None:
+    fine_ref, sol_ref = ramp
+    coarse, fine = _forms()
+    sol, solver, record = solve_sequenced(coarse, fine, OPTIONS)
+    assert sol.converged and record.coarse_converged and record.fine_converged
+    assert [s.load for s in sol.steps] == [1.0]
+    assert sol.newton_iterations < sol_ref.newton_iterations
+    u_ref = _vertex_u(fine_ref)
+    assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
+    lam_ref = fine_ref.point_contacts[0].lam
+    assert np.abs(fine.point_contacts[0].lam - lam_ref).max() < 1e-4 * lam_ref.max()
+    assert solver.max_penetration() < 1e-5
+
+
+def test_sequencing_falls_back_to_the_ramp(ramp, monkeypatch) -> None:
+    fine_ref, _ = ramp
+
+    def fails(self: NewtonSolver) -> Solution:
+        return Solution(form=self.form, load=1.0, converged=False, message="forced")
+
+    monkeypatch.setattr(NewtonSolver, "equilibrate", fails)
+    coarse, fine = _forms()
+    sol, _, record = solve_sequenced(coarse, fine, OPTIONS)
+    assert record.coarse_converged and not record.fine_converged
+    assert sol.converged and len(sol.steps) >= 2  # the ramp
+    u_ref = _vertex_u(fine_ref)
+    assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
+
+
+def test_sequencing_needs_the_mini_element() -> None:
+    coarse, fine = _forms(element="taylor-hood")
+    with pytest.raises(InputError, match="MINI"):
+        interpolate_state(coarse, fine)
