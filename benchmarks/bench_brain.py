@@ -11,7 +11,11 @@ Variants (the same mesh, model and outputs):
 - ``baseline``: the straightforward approach: Taylor-Hood P2/P1, the energy interpreted,
   PARDISO on every Newton matrix;
 - ``direct``: MINI (P1 + condensed bubble / P1), the energy compiled to machine code, PARDISO;
-- ``krylov``: MINI, compiled, GMRES with AMG blocks at Eisenstat-Walker tolerances.
+- ``krylov``: MINI, compiled, GMRES with AMG blocks at Eisenstat-Walker tolerances;
+- ``sequenced``: ``krylov`` with mesh sequencing: the load ramped first on a mesh of about
+  ``--coarse-tets`` tets (built or reused from the cache like the fine one), the fine mesh's
+  Newton started at full load from that solution. Its solve time includes the coarse stage;
+  its Newton iterations are the fine mesh's.
 
 The table gives tets, DOFs, mesh time, solve time (assembly / linear solve), the whole run
 with its outputs, Newton and Krylov iterations, peak resident memory, the midline shift, the
@@ -37,15 +41,28 @@ VARIANTS = {
     "baseline": {"element": "taylor-hood", "linear_solver": "pardiso", "compile": False},
     "direct": {"element": "mini", "linear_solver": "pardiso", "compile": True},
     "krylov": {"element": "mini", "linear_solver": "krylov", "compile": True},
+    "sequenced": {"element": "mini", "linear_solver": "krylov", "compile": True},
 }
 
 
+def cached_mesh(target_tets: int, cache: Path):
+    """The ICBM152 brain mesh of about ``target_tets`` tets, built once into ``cache``."""
+    from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
+
+    path = cache / f"brain_{target_tets}" / "brain.npz"
+    if path.is_file():
+        return load_brain_mesh(path)
+    bm = build_brain_mesh(target_tets=target_tets)
+    save_brain_mesh(bm, path.parent, figures=False)
+    return bm
+
+
 def one(target_tets: int, steps: int, cache: Path, variant: str,
-        edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False) -> dict:
+        edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False,
+        coarse_tets: int = 100_000) -> dict:
     import logging
 
     from brainbulge.errors import ConvergenceError
-    from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
     from brainbulge.studies.craniectomy import run_brain
 
     cache.mkdir(parents=True, exist_ok=True)
@@ -55,12 +72,8 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
     for noisy in ("matplotlib", "PIL"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     t0 = time.perf_counter()
-    path = cache / f"brain_{target_tets}" / "brain.npz"
-    if path.is_file():
-        bm = load_brain_mesh(path)
-    else:
-        bm = build_brain_mesh(target_tets=target_tets)
-        save_brain_mesh(bm, path.parent, figures=False)
+    bm = cached_mesh(target_tets, cache)
+    coarse = cached_mesh(coarse_tets, cache) if variant == "sequenced" else None
     t_mesh = time.perf_counter() - t0
     out = cache / f"run_{target_tets}_{variant}"
     restart = out / "restart.npz"  # left by a run that was stopped
@@ -76,7 +89,7 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
     try:
         s = run_brain({"flap": "left", "swell": "both", "steps": steps,
                        "edge_radius_mm": edge_radius_mm, **VARIANTS[variant]},
-                      out, brain_mesh=bm)
+                      out, brain_mesh=bm, coarse_brain_mesh=coarse)
     except ConvergenceError:  # stopped before Js = 1.1: its partial summary is on disk
         s = json.loads((out / "summary.json").read_text())
     t_run = time.perf_counter() - t1
@@ -89,16 +102,17 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         "shift_mm": s["midline_shift_mm"], "bulge_ml": s["bulge_volume_ml"],
         "penetration_mm": s["max_penetration_mm"], "variant": variant,
         "resumed_at": resumed_at, "load_reached": s.get("load_reached", 1.0),
+        "sequencing": s.get("mesh_sequencing"),
     }
 
 
-HEADER = (f"{'target':>8} {'variant':>8} {'tets':>8} {'dofs':>8} {'mesh s':>7} {'solve s':>8} "
+HEADER = (f"{'target':>8} {'variant':>9} {'tets':>8} {'dofs':>8} {'mesh s':>7} {'solve s':>8} "
           f"{'asm s':>7} {'lin s':>7} {'run s':>7} {'newton':>6} {'lin its':>7} {'peak MB':>8} "
           f"{'shift mm':>8} {'bulge ml':>8} {'pen mm':>8}")
 
 
 def row(n: int, r: dict) -> str:
-    return (f"{n:>8} {r['variant']:>8} {r['tets']:>8} {r['dofs']:>8} {r['mesh_s']:>7.0f} "
+    return (f"{n:>8} {r['variant']:>9} {r['tets']:>8} {r['dofs']:>8} {r['mesh_s']:>7.0f} "
             f"{r['solve_s']:>8.0f} {r['assembly_s']:>7.0f} {r['linear_s']:>7.0f} "
             f"{r['run_s']:>7.0f} {r['newton']:>6} {r['linear_its']:>7} {r['peak_mb']:>8.0f} "
             f"{r['shift_mm']:>8.2f} {r['bulge_ml']:>8.1f} {r['penetration_mm']:>8.1e}")
@@ -115,6 +129,8 @@ def main() -> int:
     parser.add_argument("--edge-radius", type=float, default=EDGE_RADIUS_MM,
                         help="rounded cut edge of the skull at the flap [mm] (the brain "
                              "command's --skull-edge-radius)")
+    parser.add_argument("--coarse-tets", type=int, default=100_000,
+                        help="coarse mesh of the sequenced variant (about this many tets)")
     parser.add_argument("--resume", action="store_true",
                         help="continue a stopped run from its restart file (CACHE/run_N_VARIANT/"
                              "restart.npz); the times then cover only this part")
@@ -122,7 +138,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.one:
         r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius,
-                args.resume)
+                args.resume, args.coarse_tets)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
@@ -130,7 +146,8 @@ def main() -> int:
     for n, variant in ((n, v) for n in args.sizes for v in args.variants):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
                "--cache", str(args.cache), "--variants", variant,
-               "--edge-radius", str(args.edge_radius)] + (["--resume"] if args.resume else [])
+               "--edge-radius", str(args.edge_radius), "--coarse-tets", str(args.coarse_tets)
+               ] + (["--resume"] if args.resume else [])
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:
@@ -142,6 +159,14 @@ def main() -> int:
         if not results[n, variant]["converged"]:
             print(f"{'':>8} {variant:>8}: stopped at load {results[n, variant]['load_reached']:.3f}"
                   " (partial run: compare its time per Newton iteration)", flush=True)
+        seq = results[n, variant].get("sequencing")
+        if seq:
+            print(f"{'':>8} {variant:>9}: coarse mesh {seq['coarse_elements']} tets, "
+                  f"{seq['coarse_newton_iterations']} Newton iterations, "
+                  f"{seq['coarse_wall_time_s']:.0f} s; carried-over |R| "
+                  f"{seq['initial_residual'] or float('nan'):.1e}; fine Newton from it "
+                  f"{'converged' if seq['fine_converged'] else 'failed (ramped instead)'}",
+                  flush=True)
         if results[n, variant].get("resumed_at"):
             print(f"{'':>8} {variant:>8}: resumed at load {results[n, variant]['resumed_at']:.3f}"
                   "; the times above are of this part only", flush=True)
@@ -156,6 +181,8 @@ def main() -> int:
                     print(f"{n:>8} {v:>8}: {base['solve_s'] / r['solve_s']:.1f}x faster than "
                           f"the baseline in the solve, {base['run_s'] / r['run_s']:.1f}x in the "
                           "whole run", flush=True)
+                if v == "sequenced":  # its solve time includes the coarse mesh's
+                    continue
                 per_it = [x["solve_s"] / max(x["newton"], 1) for x in (base, r)]
                 print(f"{n:>8} {v:>8}: {per_it[0] / per_it[1]:.1f}x faster per Newton iteration "
                       f"({per_it[0]:.1f} s against {per_it[1]:.1f} s)", flush=True)
