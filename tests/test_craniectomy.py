@@ -273,3 +273,20 @@ def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_pat
     assert s["max_penetration_mm"] < 1e-3
     assert abs(s["integral_J_minus_Js"]) < 1e-6 * s["brain_volume_ml"] * 1000
     assert ramp["mesh_sequencing"] is None
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"tets": 30000, "coarse_tets": 40000}, "must be a whole number in"),
+        ({"coarse_tets": 5000, "element": "taylor-hood"}, "needs --element mini"),
+        ({"coarse_mesh": "missing/brain.npz"}, "does not exist"),
+        ({"coarse_tets": 5000, "coarse_mesh": "missing/brain.npz"}, "not both"),
+    ],
+)
+def test_mesh_sequencing_inputs_are_checked(options, message) -> None:
+    from brainbulge.errors import InputError
+    from brainbulge.model.brain import CraniectomyCase
+
+    with pytest.raises(InputError, match=message):
+        CraniectomyCase(**options)
