@@ -22,7 +22,6 @@ from collections.abc import Callable, Sequence
 import ngsolve as ngs
 import numpy as np
 from netgen.libngpy._meshing import NgException
-from scipy.spatial import cKDTree
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.geometry.rezone import (
@@ -36,6 +35,7 @@ from brainbulge.model.problem import Problem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.point_contact import edge_bubble_midpoint_value
+from brainbulge.solver.sequencing import carry_contact_pressures
 
 log = logging.getLogger("brainbulge")
 
@@ -201,10 +201,5 @@ def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
             if np.isfinite(val):
                 pvec[Q.GetDofNrs(ngs.NodeId(ngs.VERTEX, int(v)))[0]] = val
     new.set_load(old.load.Get())
-    x = new.gfu.vec.FV().NumPy()
-    for pc_old, pc_new in zip(old.point_contacts, new.point_contacts, strict=True):
-        pc_old.update(old.gfu.vec.FV().NumPy())
-        pc_new.update(x)
-        _, idx = cKDTree(pc_old.x).query(pc_new.x)
-        pc_new.lam = pc_old.lam[idx].copy()
+    carry_contact_pressures(old, new)
 

@@ -4,8 +4,8 @@ On a fine mesh the load ramp spends its Newton iterations on the path, not on th
 the 1.54M-tet brain needs 15 iterations over three load steps at ~2 minutes each. The
 hyperelastic state at full load does not depend on the path, so the same state can be
 approached from a cheaper one: solve the same problem on a coarse mesh of the same domain
-(all load steps, seconds per iteration), carry the converged state ``(u, p)`` over to the
-fine mesh, and let Newton finish there at full load. How far that start is from the
+(all load steps, seconds per iteration), carry the converged state ``(u, p, lambda)`` over
+to the fine mesh, and let Newton finish there at full load. How far that start is from the
 fine solution is set by the coarse mesh's discretisation error, not by the load increment.
 
 The carried-over state (:func:`interpolate_state`):
@@ -16,12 +16,9 @@ The carried-over state (:func:`interpolate_state`):
 - ``p`` per pressure zone at each vertex of the zone: the coarse ``p_z`` where the coarse
   element found there belongs to the same zone, else the nearest coarse vertex of the zone
   (the pressure jumps across zones, and the two meshes' zone interfaces differ);
-- contact pressures start at zero: the active set then follows from the gaps of the
-  carried-over surface. Carrying the coarse pressures over instead (nearest coarse contact
-  point, with the pressed points moved onto the skull: the two meshes' boundaries differ by
-  up to ~3 mm on the brain) pinned ~3,300 points at once and cost line-search steps of
-  1/4 and 1/8 and three more Krylov solves (20k -> 111k tets: 7 fine Newton iterations
-  against 6; docs/design.md).
+- each contact point's pressure from the nearest coarse contact point (deformed positions),
+  and the points that carry pressure are moved along the obstacle's normal onto it,
+  ``u_i <- u_i - g_i n_i`` (the two meshes' boundaries differ by up to ~1 mm on the brain).
 
 If Newton does not converge from that start, the fine mesh ramps the load from ``Js = 1``
 as without sequencing: sequencing never ends a run that the plain ramp would finish.
@@ -76,8 +73,8 @@ def _vertex_dofs(space: ngs.FESpace, vertices: np.ndarray, count: int) -> np.nda
 
 
 def interpolate_state(old: MixedForm, new: MixedForm) -> None:
-    """Carry ``(u, p)`` and the load of ``old`` over to ``new``, a mesh of the same reference
-    domain, with zero contact pressures (see the module docstring)."""
+    """Carry ``(u, p, lambda)`` and the load of ``old`` over to ``new``, a mesh of the same
+    reference domain (see the module docstring)."""
     if new.element != "mini" or old.element != "mini":
         raise InputError("mesh sequencing needs the MINI element (P1 + bubble / P1)")
     if old.pressure_zones != new.pressure_zones:
@@ -123,9 +120,23 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
             p[~same] = p_nodal[j]
         pvec = new.gfu.components[1 + k].vec.FV().NumPy()
         pvec[_vertex_dofs(new.fes.components[1 + k], verts, 1)[:, 0]] = p
-    for pc in new.point_contacts:
-        pc.lam = np.zeros(pc.n_points)
-    new.set_load(old.load.Get())  # prescribed values exact
+    carry_contact_pressures(old, new)
+    for pc in new.point_contacts:  # pressed points onto the obstacle
+        pc.update(gvec)
+        pressed = pc.lam > 0
+        gvec += pc.P.T @ (-(pc.g * pressed)[:, None] * pc.n).ravel()
+        pc.update(gvec)
+    new.set_load(old.load.Get())  # prescribed values exact again
+
+
+def carry_contact_pressures(old: MixedForm, new: MixedForm) -> None:
+    """Each of ``new``'s contact points takes the pressure of ``old``'s nearest one (at the
+    deformed positions of both states)."""
+    for pc_old, pc_new in zip(old.point_contacts, new.point_contacts, strict=True):
+        pc_old.update(old.gfu.vec.FV().NumPy())
+        pc_new.update(new.gfu.vec.FV().NumPy())
+        _, idx = cKDTree(pc_old.x).query(pc_new.x)
+        pc_new.lam = pc_old.lam[idx].copy()
 
 
 def solve_sequenced(
