@@ -290,3 +290,14 @@ def test_mesh_sequencing_inputs_are_checked(options, message) -> None:
 
     with pytest.raises(InputError, match=message):
         CraniectomyCase(**options)
+
+
+def test_a_coarse_mesh_of_another_brain_is_refused(symmetric_brain, tmp_path) -> None:
+    import dataclasses
+
+    from brainbulge.errors import InputError
+
+    bigger = dataclasses.replace(symmetric_brain, nodes_mm=1.2 * symmetric_brain.nodes_mm)
+    with pytest.raises(InputError, match="not of the same brain"):
+        run_brain({"flap": "frontal", "swell": "left", "steps": 2}, tmp_path,
+                  brain_mesh=symmetric_brain, coarse_brain_mesh=bigger)

@@ -153,3 +153,18 @@ def test_sequencing_needs_the_mini_element() -> None:
     coarse, fine = _forms(element="taylor-hood")
     with pytest.raises(InputError, match="MINI"):
         interpolate_state(coarse, fine)
+
+
+def test_equilibrate_restores_the_state_when_newton_fails() -> None:
+    """One Newton iteration from the carried-over state is not enough: ``equilibrate``
+    reports the failure and leaves the state and contact pressures as they were."""
+    coarse, fine = _forms()
+    assert NewtonSolver(coarse, OPTIONS).solve().converged
+    interpolate_state(coarse, fine)
+    x0 = fine.gfu.vec.FV().NumPy().copy()
+    lam0 = fine.point_contacts[0].lam.copy()
+    solver = NewtonSolver(fine, SolverOptions(max_iterations=1))
+    sol = solver.equilibrate()
+    assert not sol.converged and sol.rejected_steps == 1 and "did not converge" in sol.message
+    assert np.array_equal(fine.gfu.vec.FV().NumPy(), x0)
+    assert np.array_equal(fine.point_contacts[0].lam, lam0)

@@ -135,7 +135,6 @@ class CraniectomyCase:
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
 
-
     def _check_sequencing(self) -> None:
         if self.coarse_tets is None and self.coarse_mesh is None:
             return

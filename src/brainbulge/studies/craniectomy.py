@@ -116,6 +116,7 @@ def run_brain(
         coarse_bm = coarse_brain_mesh if coarse_brain_mesh is not None else (
             coarse_brain_mesh_for(case))
     if coarse_bm is not None:
+        _check_same_domain(coarse_bm, bm)
         coarse = MixedForm(brain_problem(coarse_bm, case), element=case.element,
                            compile_energy=case.compile)
         sol, solver, sequenced = solve_sequenced(coarse, form, options)
@@ -146,6 +147,26 @@ def run_brain(
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
     return summary
+
+
+#: mesh sequencing: largest relative volume difference between the coarse and the fine mesh
+#: (two meshes of one segmentation differ by < 1 %: ICBM152 20k / 111k / 1.54M tets
+#: 2,024 / 2,030 / 2,032 ml)
+SAME_DOMAIN_RTOL = 0.05
+
+
+def _check_same_domain(coarse: BrainMesh, fine: BrainMesh) -> None:
+    """Refuse a coarse mesh of another brain (before any solve)."""
+    v_c = brain_volume_ml(coarse.nodes_mm, coarse.tets)
+    v_f = brain_volume_ml(fine.nodes_mm, fine.tets)
+    if abs(v_c - v_f) > SAME_DOMAIN_RTOL * v_f:
+        raise InputError(
+            f"the coarse mesh ({v_c:.0f} ml) is not of the same brain as the mesh ({v_f:.0f} "
+            "ml); build it from the same segmentation and options with `brainbulge mesh`")
+    if not np.array_equal(np.unique(coarse.material_names()),
+                          np.unique(fine.material_names())):
+        raise InputError("the coarse mesh has other regions than the mesh; build it from the "
+                         "same segmentation and label map with `brainbulge mesh`")
 
 
 def brain_summary(
