@@ -171,6 +171,28 @@ def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
     assert solver.stats.setups == 3
 
 
+def test_schur_matrix_is_kept_until_the_next_load_step(swollen) -> None:
+    """``S~`` and its AMG are built once per load step (``renew_schur``), or for every
+    matrix with ``schur_reuse=False``; the solves stay exact to the tolerance either way."""
+    form, ns, K1, r1 = swollen
+    K2 = K1 + sp.diags(np.where(ns.is_u_free, 0.3 * np.abs(K1.diagonal()), 0.0))
+    schur = {}
+    for reuse in (True, False):
+        solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG, schur_reuse=reuse)
+        solver.solve(K1, r1)
+        S1 = solver._amg_p.ml.levels[0].A.copy()
+        x2 = solver.solve(K2, r1)
+        schur[reuse] = abs(solver._amg_p.ml.levels[0].A - S1).max() / abs(S1).max()
+        ref = _direct(K2, r1)
+        assert np.linalg.norm(x2 - ref) <= 1e-6 * np.linalg.norm(ref)
+        if reuse:
+            solver.renew_schur()
+            solver.solve(K2, r1)
+            assert abs(solver._amg_p.ml.levels[0].A - S1).max() / abs(S1).max() > 1e-3
+        assert solver.stats.setups == 1
+    assert schur[True] == 0.0 and schur[False] > 1e-3
+
+
 def test_an_initial_guess_saves_iterations_and_a_bad_one_is_dropped(swollen) -> None:
     """A loose solution as the guess of a tighter solve (the Newton retry): fewer
     iterations than from zero, the same tolerance relative to |r|; a guess worse than zero

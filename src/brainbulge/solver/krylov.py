@@ -49,6 +49,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.solver.sparse_reuse import PatternGather
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -243,17 +244,28 @@ class _AMG:
         self.B = B
         self.options = options
         self.ml = None
+        # the finest level of each new matrix, padded by a plan made once per pattern
+        self._padded_csr = PatternGather(lambda A: self._pad(A, 0.0), fill=self._fill)
 
-    def padded(self, A: sp.spmatrix) -> sp.spmatrix:
-        coo = A.tocoo()
+    @staticmethod
+    def _fill(A: sp.spmatrix) -> float:
+        """The diagonal of the identity rows at unused slots: the mean diagonal."""
         diag = np.abs(A.diagonal())
-        fill = float(np.mean(diag[diag > 0])) if np.any(diag > 0) else 1.0
+        return float(np.mean(diag[diag > 0])) if np.any(diag > 0) else 1.0
+
+    def _pad(self, A: sp.spmatrix, fill: float) -> sp.csr_matrix:
+        coo = A.tocoo()
         rows = np.concatenate([self.slot[coo.row], self.empty])
         cols = np.concatenate([self.slot[coo.col], self.empty])
         vals = np.concatenate([coo.data, np.full(len(self.empty), fill)])
         Ap = sp.csr_matrix((vals, (rows, cols)), shape=(self.n_pad, self.n_pad))
         Ap.sum_duplicates()
         Ap.sort_indices()
+        return Ap
+
+    def padded(self, A: sp.spmatrix) -> sp.spmatrix:
+        """``A`` in the AMG's index space (BSR node blocks when ``blocksize > 1``)."""
+        Ap = self._pad(A, self._fill(A))
         if self.blocksize > 1:
             return Ap.tobsr(blocksize=(self.blocksize, self.blocksize))
         return Ap
@@ -301,7 +313,7 @@ class _AMG:
     def update(self, A: sp.spmatrix) -> None:
         """Keep the hierarchy, smooth with the new matrix on the finest level."""
         lvl = self.ml.levels[0]
-        lvl.A = sp.csr_matrix(self.padded(A))
+        lvl.A = self._padded_csr(A)
         if len(self.ml.levels) == 1:
             return
         # not ml.change_solve_matrix: it rebuilds the smoothers without their options
@@ -356,6 +368,9 @@ class BlockKrylovSolver:
         schur_drop: with ``schur="simple"``, couplings of ``S~`` weaker than this times
             ``sqrt(|S_ii S_jj|)`` are dropped and lumped onto the diagonal before its AMG
             (see :data:`SCHUR_DROP`); 0 keeps ``S~`` whole.
+        schur_reuse: with ``schur="simple"``, keep ``S~`` and its AMG from one solve to the
+            next until :meth:`renew_schur` (Newton calls it at each load step) or a refresh;
+            False rebuilds ``S~`` for every matrix.
     """
 
     def __init__(
@@ -372,6 +387,7 @@ class BlockKrylovSolver:
         amg: dict | None = None,
         reference: sp.spmatrix | None = None,
         schur_drop: float = SCHUR_DROP,
+        schur_reuse: bool = True,
     ) -> None:
         if method not in METHODS:
             raise InputError(f"unknown Krylov method {method!r}; choose one of {METHODS}")
@@ -395,10 +411,14 @@ class BlockKrylovSolver:
         self.refresh_factor = refresh_factor
         self.reference = reference
         self.schur_drop = schur_drop
+        self.schur_reuse = schur_reuse
+        self._schur_stale = True  # S~ to be rebuilt at the next solve
         self.stats = KrylovStats()
         self._ref_iterations: int | None = None
         self._refresh_requested = False
         self._ready = False
+        self._block_plans: tuple[PatternGather, ...] = ()
+        self._block_plans_rows = -1
         # displacement AMG on node blocks: slot = dim * node + component
         nodes, node_idx = np.unique(layout.vertex, return_inverse=True)
         dim = layout.dim
@@ -424,12 +444,14 @@ class BlockKrylovSolver:
         n0 = len(self.is_u)
         if K.shape[0] < n0:
             raise InputError(f"the matrix has {K.shape[0]} rows, fewer than is_u ({n0})")
-        iq = np.concatenate([self.ip, np.arange(n0, K.shape[0])])
-        Kuu = K[self.iu]
-        A = Kuu[:, self.iu].tocsr()
-        Bt = Kuu[:, iq].tocsr()
-        C = (-K[iq][:, iq]).tocsr()
-        return A, Bt, C
+        if self._block_plans_rows != K.shape[0]:  # another number of multiplier rows
+            iu, iq = self.iu, np.concatenate([self.ip, np.arange(n0, K.shape[0])])
+            self._block_plans = (PatternGather(lambda M: M[iu][:, iu]),
+                                 PatternGather(lambda M: M[iu][:, iq]),
+                                 PatternGather(lambda M: M[iq][:, iq]))
+            self._block_plans_rows = K.shape[0]
+        A, Bt, Cneg = (plan(K) for plan in self._block_plans)
+        return A, Bt, -Cneg
 
     def _d_inv(self, A: sp.csr_matrix) -> np.ndarray:
         d = np.abs(A.diagonal())
@@ -461,6 +483,7 @@ class BlockKrylovSolver:
         self._amg_u.setup(self.reference if self.reference is not None else A)
         if self.schur == "simple":
             self._amg_p.setup(self._schur_simple(A, Bt, C))
+        self._schur_stale = False
         self._ready = True
         self._ref_iterations = None
         self._refresh_requested = False
@@ -472,6 +495,10 @@ class BlockKrylovSolver:
     def refresh(self) -> None:
         """Rebuild the AMG hierarchies at the next solve."""
         self._refresh_requested = True
+
+    def renew_schur(self) -> None:
+        """Rebuild ``S~`` (and its finest AMG level) at the next solve: a new load step."""
+        self._schur_stale = True
 
     def release(self) -> None:
         """Free the AMG hierarchies (a later solve sets them up again)."""
@@ -486,8 +513,9 @@ class BlockKrylovSolver:
         A, Bt, C = self._blocks(K)
         if self.reference is None:
             self._amg_u.update(A)
-        if self.schur == "simple":
+        if self.schur == "simple" and (self._schur_stale or not self.schur_reuse):
             self._amg_p.update(self._schur_simple(A, Bt, C))
+            self._schur_stale = False
         return A, Bt, C
 
     # --- preconditioner ------------------------------------------------------------------

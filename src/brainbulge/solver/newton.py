@@ -33,6 +33,7 @@ from brainbulge.errors import ConvergenceError, InfeasibleError, InputError
 from brainbulge.model.problem import Problem
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -188,6 +189,10 @@ class NewtonSolver:
         self.eta = self.eta_cap = ETA_MAX
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.last_linear_solution: np.ndarray | None = None
+        # the tangent's pattern is the same at every iteration: slice and add by plans
+        self._free_part = PatternGather(lambda K: K[self.free][:, self.free])
+        self._add_curvature = PatternAdd()
+        self._add_elimination = PatternAdd()
 
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (AMG hierarchies, factorisations) after the
@@ -232,12 +237,14 @@ class NewtonSolver:
         with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
             self.form.a.AssembleLinearization(x)
         mat = self.form.a.mat  # (the width, as unused last DOFs leave trailing empty columns)
-        K = sp.csr_matrix(mat.CSR(), shape=(mat.height, mat.width))
+        data, indices, indptr = mat.CSR()
+        K = sp.csr_matrix((np.array(data), indices, indptr), shape=(mat.height, mat.width))
         for pc in self.form.point_contacts:
             pc.update(x.FV().NumPy())
-            K = K - pc.curvature()  # CSR sums: the direct solver restores the diagonal
+            K = self._add_curvature(K, -pc.curvature())  # on K's pattern where it fits
+        K = self._free_part(K)
         self.t_assembly += time.perf_counter() - t0
-        return K[self.free][:, self.free]
+        return K
 
     def newton_direction(
         self, x: ngs.BaseVector, K: sp.csr_matrix | None = None, guess: np.ndarray | None = None
@@ -287,7 +294,8 @@ class NewtonSolver:
             if NodalElimination.applies(B_all):  # each point's row on a node of its own
                 if B.shape[0]:
                     solved = [pts[on] for _, pts, on in rows_B]
-                    elimination = NodalElimination(K, B, c, self.is_u_free)
+                    elimination = NodalElimination(K, B, c, self.is_u_free,
+                                                   add=self._add_elimination)
                     K, b = elimination.system(b)
                     if guess is not None and len(guess) == len(b):
                         # y has no normal part at the constrained nodes (N^T y = 0); a guess
@@ -349,6 +357,9 @@ class NewtonSolver:
         # the active set cycle and the line search halve every step)
         self._forced = [np.zeros(pc.n_points, dtype=bool) for pc in pcs]
         self.eta = self.eta_cap = ETA_MAX
+        renew_schur = getattr(self.linear, "renew_schur", None)
+        if renew_schur is not None:  # the Krylov preconditioner's S~: once per load step
+            renew_schur()
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
         short_steps, norm_before_short = 0, norm  # the run of short line-search steps
@@ -783,8 +794,9 @@ class NodalElimination:
     """
 
     def __init__(self, K: sp.csr_matrix, B: sp.csr_matrix, c: np.ndarray,
-                 is_u: np.ndarray) -> None:
+                 is_u: np.ndarray, add: PatternAdd | None = None) -> None:
         self.K = K
+        self._add = add or PatternAdd()
         self.beta = np.sqrt(np.asarray(B.multiply(B).sum(axis=1)).ravel())
         self.N = (B.T @ sp.diags(1.0 / self.beta)).tocsc()
         self.gbar = -np.asarray(c) / self.beta
@@ -808,7 +820,9 @@ class NodalElimination:
         KN = (K @ N).tocsc()
         core = NtK @ N + self.d * sp.identity(N.shape[1])
         dK = -(N @ NtK) - KN @ N.T + N @ core @ N.T
-        Kp = (K + dK).tocsr()
+        # on K's pattern (dK lies in the node blocks K couples), so that the Krylov
+        # solver's block plans stay valid whatever the active set
+        Kp = self._add(sp.csr_matrix((K.data.copy(), K.indices, K.indptr), shape=K.shape), dK)
         return Kp, self.project(b - K @ (N @ self.gbar))
 
     def recover(self, y: np.ndarray) -> np.ndarray:

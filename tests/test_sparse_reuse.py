@@ -1,0 +1,56 @@
+"""Pattern-reusing slicing and addition agree with SciPy's, on one pattern and after a change."""
+
+import numpy as np
+import scipy.sparse as sp
+
+from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather
+
+
+def _matrix(seed: int, n: int = 60, density: float = 0.1) -> sp.csr_matrix:
+    rng = np.random.default_rng(seed)
+    M = sp.random(n, n, density=density, random_state=rng, format="csr")
+    return (M + M.T + sp.identity(n)).tocsr()
+
+
+def test_gather_matches_scipy_slicing_and_reuses_its_plan() -> None:
+    K = _matrix(0)
+    rows = np.array([0, 3, 4, 10, 11, 40, 59])
+    cols = np.array([1, 3, 7, 10, 20, 40])
+    plan = PatternGather(lambda M: M[rows][:, cols])
+    for scale in (1.0, -2.5):  # same pattern, new values
+        K2 = K.copy()
+        K2.data = K2.data * scale + np.arange(K2.nnz)
+        got = plan(K2)
+        assert (abs(got - K2[rows][:, cols]) > 0).nnz == 0
+    assert plan.plans == 1
+    other = _matrix(1)  # another pattern: a new plan, still exact
+    assert (abs(plan(other) - other[rows][:, cols]) > 0).nnz == 0
+    assert plan.plans == 2
+
+
+def test_gather_fills_the_entries_the_transform_adds() -> None:
+    K = _matrix(2, n=10)
+
+    def pad_explicit(M):  # two identity rows with explicit (zero) entries on the diagonal
+        coo = M.tocoo()
+        return sp.csr_matrix((np.concatenate([coo.data, [0.0, 0.0]]),
+                              (np.concatenate([coo.row, [10, 11]]),
+                               np.concatenate([coo.col, [10, 11]]))), shape=(12, 12))
+
+    plan = PatternGather(pad_explicit, fill=lambda M: 7.0)
+    got = plan(K).toarray()
+    assert np.allclose(got[:10, :10], K.toarray())
+    assert np.allclose(np.diag(got)[10:], 7.0)
+
+
+def test_add_on_the_pattern_matches_scipy_and_falls_back_outside_it() -> None:
+    K = _matrix(3)
+    inside = sp.csr_matrix((np.array([1.5, -2.0]), ([0, 5], [0, 5])), shape=K.shape)
+    add = PatternAdd()
+    expected = (K + inside).toarray()
+    got = add(K.copy(), inside)
+    assert np.allclose(got.toarray(), expected)
+    assert got.nnz == K.nnz  # the result keeps K's pattern
+    i, j = next((i, j) for i in range(60) for j in range(60) if K[i, j] == 0)
+    outside = sp.csr_matrix((np.array([3.0]), ([i], [j])), shape=K.shape)
+    assert np.allclose(add(K.copy(), outside).toarray(), (K + outside).toarray())
