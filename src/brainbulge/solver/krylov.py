@@ -501,8 +501,11 @@ class BlockKrylovSolver:
         self._schur_stale = True
 
     def release(self) -> None:
-        """Free the AMG hierarchies (a later solve sets them up again)."""
+        """Free the AMG hierarchies and the sparse plans (a later solve makes them again)."""
         self._amg_u.ml = self._amg_p.ml = None
+        self._amg_u._padded_csr = PatternGather(self._amg_u._padded_csr.transform,
+                                                fill=self._amg_u._fill)
+        self._block_plans, self._block_plans_rows = (), -1
         self._ready = False
 
     def _update(self, K: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:

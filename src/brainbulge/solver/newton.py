@@ -189,10 +189,7 @@ class NewtonSolver:
         self.eta = self.eta_cap = ETA_MAX
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.last_linear_solution: np.ndarray | None = None
-        # the tangent's pattern is the same at every iteration: slice and add by plans
-        self._free_part = PatternGather(lambda K: K[self.free][:, self.free])
-        self._add_curvature = PatternAdd()
-        self._add_elimination = PatternAdd()
+        self._new_plans()
 
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (AMG hierarchies, factorisations) after the
@@ -202,6 +199,14 @@ class NewtonSolver:
         if release is not None:
             release()
         self.last_linear_solution = None
+        self._new_plans()
+
+    def _new_plans(self) -> None:
+        """The tangent's pattern is the same at every iteration: it is sliced and added to
+        by plans (:mod:`brainbulge.solver.sparse_reuse`), made at the first tangent."""
+        self._free_part = PatternGather(lambda K: K[self.free][:, self.free])
+        self._add_curvature = PatternAdd()
+        self._add_elimination = PatternAdd()
 
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:

@@ -75,7 +75,9 @@ class PatternGather:
             index = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=np.float64), K.indices,
                                    K.indptr), shape=K.shape)
             T = canonical(sp.csr_matrix(self.transform(index)))
-            self._take = T.data.astype(np.int64) - 1
+            # int32 where it fits: a plan of the 1.54M-tet tangent holds 69M of them
+            itype = np.int32 if K.nnz < 2**31 - 1 else np.int64
+            self._take = T.data.astype(itype) - 1
             self._indptr, self._indices, self._shape = T.indptr, T.indices, T.shape
             self._pattern.remember(K)
             self.plans += 1
