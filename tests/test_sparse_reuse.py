@@ -3,7 +3,7 @@
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather
+from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, _same_array
 
 
 def _matrix(seed: int, n: int = 60, density: float = 0.1) -> sp.csr_matrix:
@@ -54,3 +54,40 @@ def test_add_on_the_pattern_matches_scipy_and_falls_back_outside_it() -> None:
     i, j = next((i, j) for i in range(60) for j in range(60) if K[i, j] == 0)
     outside = sp.csr_matrix((np.array([3.0]), ([i], [j])), shape=K.shape)
     assert np.allclose(add(K.copy(), outside).toarray(), (K + outside).toarray())
+
+
+def test_add_searches_positions_once_per_pattern_of_the_added_matrix() -> None:
+    K = _matrix(4)
+    coo = K.tocoo()
+    pick = np.arange(0, K.nnz, 7)  # entries inside K's pattern, in scrambled order
+    pick = pick[::-1]
+
+    def inside(values: np.ndarray) -> sp.coo_matrix:
+        return sp.coo_matrix((values, (coo.row[pick], coo.col[pick])), shape=K.shape)
+
+    add = PatternAdd()
+    for seed in (5, 6):  # same pattern, new values: the positions are reused
+        M = inside(np.random.default_rng(seed).normal(size=len(pick)))
+        got = add(K.copy(), M)
+        assert np.allclose(got.toarray(), (K + M).toarray())
+        assert got.nnz == K.nnz
+    assert add.plans == 1
+    fewer = sp.coo_matrix((np.ones(3), (coo.row[:3], coo.col[:3])), shape=K.shape)
+    assert np.allclose(add(K.copy(), fewer).toarray(), (K + fewer).toarray())
+    assert add.plans == 2
+
+
+def test_gathered_matrices_share_the_plans_read_only_index_arrays() -> None:
+    K = _matrix(7)
+    rows = np.arange(0, 60, 2)
+    plan = PatternGather(lambda M: M[rows][:, rows])
+    first, second = plan(K), plan(K * 2.0)
+    assert np.shares_memory(first.indices, second.indices)  # no copy per matrix
+    assert not first.indices.flags.writeable and not first.indptr.flags.writeable
+    assert np.allclose(second.toarray(), 2 * K[rows][:, rows].toarray())
+    # a plan fed with those matrices recognises their pattern without comparing it
+    inner = PatternGather(lambda M: M[:5][:, :5])
+    assert np.allclose(inner(first).toarray(), first[:5][:, :5].toarray())
+    assert _same_array(second.indices, inner._pattern.indices)  # recognised in O(1)
+    assert np.allclose(inner(second).toarray(), second[:5][:, :5].toarray())
+    assert inner.plans == 1
