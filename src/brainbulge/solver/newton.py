@@ -161,6 +161,8 @@ class NewtonSolver:
         r = fes.Range(0)
         is_u[r.start : r.stop] = True
         self.is_u_free = is_u[self.free]
+        self._free_index = np.full(fes.ndof, -1, dtype=np.int64)  # full -> free numbering
+        self._free_index[self.free] = np.arange(len(self.free))
         mesh = form.mesh
         self.volume = float(ngs.Integrate(ngs.CF(1), mesh))
         self.length = self.volume ** (1 / mesh.dim)
@@ -208,6 +210,14 @@ class NewtonSolver:
         self._add_curvature = PatternAdd()
         self._add_elimination = PatternAdd()
 
+    def _restrict_free(self, M: sp.spmatrix) -> sp.coo_matrix:
+        """``M[free][:, free]`` of a matrix with few entries (no slicing over all DOFs)."""
+        coo = M.tocoo()
+        i, j = self._free_index[coo.row], self._free_index[coo.col]
+        keep = (i >= 0) & (j >= 0)
+        n = len(self.free)
+        return sp.coo_matrix((coo.data[keep], (i[keep], j[keep])), shape=(n, n))
+
     # --- residual and tangent ----------------------------------------------------------
     def residual(self, x: ngs.BaseVector) -> np.ndarray:
         """``R(x)`` (full DOF numbering) with the point contacts' forces at their current
@@ -243,11 +253,12 @@ class NewtonSolver:
             self.form.a.AssembleLinearization(x)
         mat = self.form.a.mat  # (the width, as unused last DOFs leave trailing empty columns)
         data, indices, indptr = mat.CSR()
-        K = sp.csr_matrix((np.array(data), indices, indptr), shape=(mat.height, mat.width))
+        # a view of NGSolve's matrix, only read: the free part is gathered out of it
+        K = sp.csr_matrix((np.asarray(data), indices, indptr), shape=(mat.height, mat.width))
+        K = self._free_part(K)
         for pc in self.form.point_contacts:
             pc.update(x.FV().NumPy())
-            K = self._add_curvature(K, -pc.curvature())  # on K's pattern where it fits
-        K = self._free_part(K)
+            K = self._add_curvature(K, self._restrict_free(-pc.curvature()))
         self.t_assembly += time.perf_counter() - t0
         return K
 
