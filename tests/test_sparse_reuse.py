@@ -3,7 +3,7 @@
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, _same_array
+from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, PatternProject, _same_array
 
 
 def _matrix(seed: int, n: int = 60, density: float = 0.1) -> sp.csr_matrix:
@@ -91,3 +91,63 @@ def test_gathered_matrices_share_the_plans_read_only_index_arrays() -> None:
     assert _same_array(second.indices, inner._pattern.indices)  # recognised in O(1)
     assert np.allclose(inner(second).toarray(), second[:5][:, :5].toarray())
     assert inner.plans == 1
+
+
+def _node_matrix(seed: int, nodes: int = 20) -> sp.csr_matrix:
+    """A vector-P1-like tangent: 3 DOFs per node (numbered component by component, as
+    NGSolve's VectorH1), every DOF of two coupled nodes coupled, unsymmetric values."""
+    rng = np.random.default_rng(seed)
+    G = sp.random(nodes, nodes, density=0.15, random_state=rng, format="csr")
+    G = ((G + G.T + sp.identity(nodes)) != 0).astype(float)
+    pattern = sp.kron(np.ones((3, 3)), G, format="csr")  # dof = component * nodes + node
+    K = pattern.copy()
+    K.data = rng.normal(size=K.nnz)
+    return K
+
+
+def _normals(rows_per_point: list[list[int]], n: int, seed: int) -> sp.csc_matrix:
+    rng = np.random.default_rng(seed)
+    vals, rows, cols = [], [], []
+    for j, dofs in enumerate(rows_per_point):
+        v = rng.normal(size=len(dofs))
+        vals += list(v / np.linalg.norm(v))
+        rows += dofs
+        cols += [j] * len(dofs)
+    return sp.csc_matrix((vals, (rows, cols)), shape=(n, len(rows_per_point)))
+
+
+def test_projection_on_the_pattern_matches_the_dense_formula_and_keeps_its_plan() -> None:
+    nodes = 20
+    K = _node_matrix(8, nodes)
+    n = K.shape[0]
+    points = [[c * nodes + a for c in range(3)] for a in (2, 5, 7)]
+    points.append([0 * nodes + 9, 2 * nodes + 9])  # a node with one component held
+    project = PatternProject()
+    for seed in (0, 1):  # same constrained DOFs, new normals: one plan
+        N = _normals(points, n, seed)
+        P = (N @ N.T).toarray()
+        Pi = np.eye(n) - P
+        want = Pi @ K.toarray() @ Pi + 0.7 * P
+        got = project(K, N, 0.7)
+        np.testing.assert_allclose(got.toarray(), want, atol=1e-13)
+        assert got.nnz == K.nnz  # K's pattern
+    assert project.plans == 1 and project._plan is not None  # planned, not SciPy's products
+    N = _normals(points[:2], n, 2)  # another active set: a new plan
+    P = (N @ N.T).toarray()
+    Pi = np.eye(n) - P
+    np.testing.assert_allclose(project(K, N, 0.7).toarray(),
+                               Pi @ K.toarray() @ Pi + 0.7 * P, atol=1e-13)
+    assert project.plans == 2
+
+
+def test_projection_falls_back_to_scipy_off_the_node_structure() -> None:
+    K = _node_matrix(9)
+    K = (K + sp.csr_matrix(([1.0], ([0], [K.shape[0] - 1])), shape=K.shape)).tocsr()  # unsymmetric
+    n = K.shape[0]
+    N = _normals([[1, 21, 41]], n, 3)
+    P = (N @ N.T).toarray()
+    Pi = np.eye(n) - P
+    project = PatternProject()
+    np.testing.assert_allclose(project(K, N, 2.0).toarray(),
+                               Pi @ K.toarray() @ Pi + 2.0 * P, atol=1e-13)
+    assert project._perm is None  # no transposed positions for an unsymmetric pattern

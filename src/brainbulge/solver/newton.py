@@ -33,7 +33,7 @@ from brainbulge.errors import ConvergenceError, InfeasibleError, InputError
 from brainbulge.model.problem import Problem
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather
+from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, PatternProject
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -208,7 +208,7 @@ class NewtonSolver:
         by plans (:mod:`brainbulge.solver.sparse_reuse`), made at the first tangent."""
         self._free_part = PatternGather(lambda K: K[self.free][:, self.free])
         self._add_curvature = PatternAdd()
-        self._add_elimination = PatternAdd()
+        self._project_elimination = PatternProject()
 
     def _restrict_free(self, M: sp.spmatrix) -> sp.coo_matrix:
         """``M[free][:, free]`` of a matrix with few entries (no slicing over all DOFs)."""
@@ -311,7 +311,7 @@ class NewtonSolver:
                 if B.shape[0]:
                     solved = [pts[on] for _, pts, on in rows_B]
                     elimination = NodalElimination(K, B, c, self.is_u_free,
-                                                   add=self._add_elimination)
+                                                   project=self._project_elimination)
                     K, b = elimination.system(b)
                     if guess is not None and len(guess) == len(b):
                         # y has no normal part at the constrained nodes (N^T y = 0); a guess
@@ -810,9 +810,9 @@ class NodalElimination:
     """
 
     def __init__(self, K: sp.csr_matrix, B: sp.csr_matrix, c: np.ndarray,
-                 is_u: np.ndarray, add: PatternAdd | None = None) -> None:
+                 is_u: np.ndarray, project: PatternProject | None = None) -> None:
         self.K = K
-        self._add = add or PatternAdd()
+        self._project = project or PatternProject()
         self.beta = np.sqrt(np.asarray(B.multiply(B).sum(axis=1)).ravel())
         self.N = (B.T @ sp.diags(1.0 / self.beta)).tocsc()
         self.gbar = -np.asarray(c) / self.beta
@@ -832,13 +832,9 @@ class NodalElimination:
         """``(Pi K Pi + d N N^T, Pi (b - K N gbar))``."""
         K, N = self.K, self.N
         self._b = b
-        NtK = (N.T @ K).tocsr()
-        KN = (K @ N).tocsc()
-        core = NtK @ N + self.d * sp.identity(N.shape[1])
-        dK = -(N @ NtK) - KN @ N.T + N @ core @ N.T
-        # on K's pattern (dK lies in the node blocks K couples), so that the Krylov
-        # solver's block plans stay valid whatever the active set
-        Kp = self._add(sp.csr_matrix((K.data.copy(), K.indices, K.indptr), shape=K.shape), dK)
+        # on K's pattern (Pi K Pi + d P lies in the node blocks K couples), so that the
+        # Krylov solver's block plans stay valid whatever the active set
+        Kp = self._project(K, N, self.d)
         return Kp, self.project(b - K @ (N @ self.gbar))
 
     def recover(self, y: np.ndarray) -> np.ndarray:
