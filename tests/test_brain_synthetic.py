@@ -174,6 +174,13 @@ def test_flap_removes_obstacle_with_rounded_edge(synthetic_mesh) -> None:
     fd = np.stack([(skull.signed_distance(rim + h * e)[0] - skull.signed_distance(rim - h * e)[0])
                    / (2 * h) for e in np.eye(3)], axis=1)
     assert np.abs(fd - skull.signed_distance(rim)[1]).max() < 0.1
+    # the distances alone (the summary's tests of millions of points) are the same numbers
+    for pts in (rim, surface_out, far + 1.0):
+        assert np.array_equal(skull.signed_distance(pts, gradient=False)[0],
+                              skull.signed_distance(pts)[0])
+        assert np.array_equal(skull.envelope_distance(pts, gradient=False)[0],
+                              skull.envelope_distance(pts)[0])
+    assert skull.signed_distance(rim, gradient=False)[1] is None
 
 
 def test_scaling_to_brain_volume(synthetic_image) -> None:

@@ -120,7 +120,7 @@ def bulge_volume_ml(
 
     ``V_bulge = integral over the deformed mesh of [phi_env(x) > 0] dx / 1000``, with
     ``phi_env(points (k, 3)) -> (k,)`` a signed distance in mm, positive outside the skull's
-    inner surface, e.g. ``lambda x: skull.envelope_distance(x)[0]``.
+    inner surface, e.g. ``lambda x: skull.envelope_distance(x, gradient=False)[0]``.
 
     Each deformed tet is split into ``order**3`` equal sub-tets (the regular Kuhn subdivision
     with ``order`` segments per edge); ``phi_env`` is sampled at the lattice points and

@@ -185,7 +185,7 @@ def brain_summary(
     def near_rim(X: np.ndarray) -> np.ndarray:
         """Within ``band`` of the flap rim: the cutter surface meets the skull surface."""
         d_cut, _ = flap.cutter_distance(X)
-        phi_env, _ = skull.envelope_distance(X)
+        phi_env, _ = skull.envelope_distance(X, gradient=False)
         return np.hypot(d_cut, phi_env) < band
 
     out: dict[str, Any] = {
@@ -215,7 +215,8 @@ def brain_summary(
     out["midline_shift_monro_mm"] = monro["midline_shift_mm"] if monro["midline_nodes"] else None
 
     def outside(x: np.ndarray) -> np.ndarray:
-        return np.minimum(skull.envelope_distance(x)[0], -skull.signed_distance(x)[0])
+        return np.minimum(skull.envelope_distance(x, gradient=False)[0],
+                          -skull.signed_distance(x, gradient=False)[0])
 
     out["bulge_volume_ml"] = bulge_volume_ml(bm.nodes_mm, bm.tets, u, outside)
     out["brain_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets)

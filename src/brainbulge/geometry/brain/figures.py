@@ -43,7 +43,7 @@ def plot_sections(mesh: BrainMesh, path: str | Path, centre_mm: np.ndarray | Non
         _, nearest = tree.query(pts)
         from brainbulge.geometry.brain.skull import RigidSkull
 
-        inside = RigidSkull(mesh.envelope).envelope_distance(pts)[0] < phi_tol
+        inside = RigidSkull(mesh.envelope).envelope_distance(pts, gradient=False)[0] < phi_tol
         rgb = colours[mesh.tissue[nearest] - 1] * np.where(mesh.side[nearest] == 0, 0.8, 1.0
                                                            )[:, None]
         rgb[~inside] = 1.0

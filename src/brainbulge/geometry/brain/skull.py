@@ -35,9 +35,11 @@ class RigidSkull:
         sdf = envelope.sdf_mm.astype(np.float64)
         self._coeffs = ndi.spline_filter(sdf, order=3, mode="nearest")
 
-    def envelope_distance(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def envelope_distance(self, points_mm: np.ndarray,
+                          gradient: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Signed distance to the intact skull's inner surface (mm, positive outside) and
-        its gradient (n, 3)."""
+        its gradient (n, 3), or None without ``gradient`` (one spline evaluation instead of
+        seven: the summary's tests of 6M quadrature points at 1.54M tets)."""
         ijk = (points_mm @ self._inv[:3, :3].T + self._inv[:3, 3]).T
 
         def spline(at: np.ndarray) -> np.ndarray:
@@ -45,14 +47,9 @@ class RigidSkull:
                                        prefilter=False)
 
         phi = spline(ijk)
-        # gradient of the same C2 spline (central differences, step 1e-3 voxel), so that
-        # contact's Newton sees the derivative of the gap it evaluates
-        g_index = np.empty((ijk.shape[1], 3))
-        for k in range(3):
-            e = np.zeros((3, 1))
-            e[k] = 1e-3
-            g_index[:, k] = (spline(ijk + e) - spline(ijk - e)) / 2e-3
-        grad = g_index @ self._inv[:3, :3]
+        grad = None
+        if gradient:
+            grad = self._spline_gradient(spline, ijk)
         # outside the grid: add the distance to it
         shape = np.array(self.envelope.sdf_mm.shape) - 1
         beyond = np.maximum(-ijk.T, 0) + np.maximum(ijk.T - shape, 0)
@@ -60,23 +57,38 @@ class RigidSkull:
         phi = phi + np.linalg.norm(beyond * spacing, axis=1)
         return phi, grad
 
-    def signed_distance(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``phi`` (n,) in mm, positive = penetration into the skull, and ``grad phi`` (n, 3).
+    def _spline_gradient(self, spline, ijk: np.ndarray) -> np.ndarray:
+        """World gradient (n, 3) of the spline at index coordinates ``ijk`` (3, n)."""
+        # gradient of the same C2 spline (central differences, step 1e-3 voxel), so that
+        # contact's Newton sees the derivative of the gap it evaluates
+        g_index = np.empty((ijk.shape[1], 3))
+        for k in range(3):
+            e = np.zeros((3, 1))
+            e[k] = 1e-3
+            g_index[:, k] = (spline(ijk + e) - spline(ijk - e)) / 2e-3
+        return g_index @ self._inv[:3, :3]
+
+    def signed_distance(self, points_mm: np.ndarray,
+                        gradient: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """``phi`` (n,) in mm, positive = penetration into the skull, and ``grad phi`` (n, 3)
+        (None without ``gradient``).
 
         Vectorised over ``points_mm`` of shape (n, 3) in world millimetres.
         """
         pts = np.atleast_2d(np.asarray(points_mm, dtype=float))
-        phi_env, g_env = self.envelope_distance(pts)
+        phi_env, g_env = self.envelope_distance(pts, gradient)
         if self.flap is None:
             return phi_env, g_env
         r = self.edge_radius_mm
         d_cut, g_cut = self.flap.cutter_distance(pts)
         # standard distances (negative inside) of the skull solid and of the cutter's outside
         u = np.stack([-phi_env + r, -d_cut + r], axis=1)
-        gu = np.stack([-g_env, -g_cut], axis=1)  # (n, 2, 3)
         upos = np.maximum(u, 0.0)
         norm = np.linalg.norm(upos, axis=1)
         d = norm + np.minimum(u.max(axis=1), 0.0) - r
+        if not gradient:
+            return -d, None
+        gu = np.stack([-g_env, -g_cut], axis=1)  # (n, 2, 3)
         first = (u[:, 0] >= u[:, 1]).astype(float)
         weight = np.where((norm > 0)[:, None], upos / np.where(norm > 0, norm, 1.0)[:, None],
                           np.stack([first, 1 - first], axis=1))
