@@ -66,11 +66,13 @@ def tangential_stretch(C: np.ndarray, n: np.ndarray, dim: int) -> np.ndarray:
     if dim == 2:
         t = np.stack([-n[:, 1], n[:, 0], np.zeros(len(n))], axis=1)
         return stretch_along(C, t)
-    # C projected onto the plane normal to n: eigenvalues (m1, m2, 0)
-    P = np.eye(3) - n[:, :, None] * n[:, None, :]
-    Q = P @ C @ P
-    trQ = np.trace(Q, axis1=1, axis2=2)
-    trQ2 = np.einsum("nij,nji->n", Q, Q)
+    # C projected onto the plane normal to n, Q = P C P with P = I - n n^T: eigenvalues
+    # (m1, m2, 0), from tr Q = tr C - n.Cn and tr Q^2 = tr C^2 - 2 |Cn|^2 + (n.Cn)^2 (C
+    # symmetric); no batched 3x3 products (40 s of the 1.54M-tet summary's 20M points)
+    Cn = np.einsum("nij,nj->ni", C, n)
+    c_nn = np.einsum("ni,ni->n", n, Cn)
+    trQ = np.trace(C, axis1=1, axis2=2) - c_nn
+    trQ2 = np.einsum("nij,nij->n", C, C) - 2 * np.einsum("ni,ni->n", Cn, Cn) + c_nn**2
     disc = np.sqrt(np.maximum(2 * trQ2 - trQ**2, 0.0))
     return np.sqrt((trQ + disc) / 2)
 
