@@ -125,9 +125,10 @@ class PatternAdd:
     entry outside ``K``'s pattern.
 
     The position in ``K.data`` of each entry of ``M`` is searched once per pair of patterns
-    (by one SciPy sum, :func:`_positions`), then reused: Newton's contact terms keep their
-    pattern while the active set does not change. At 1.54M tets (69M non-zeros in ``K``, 6M
-    in the nodal elimination's ``M``) the search over all of ``K`` took 6-15 s per call.
+    (by one SciPy sum over ``M``'s rows, :func:`_positions`), then reused: the contact
+    curvature keeps its pattern while the active set does not change. (A search over all of
+    ``K`` for each call took 6-15 s at 1.54M tets when the nodal elimination's 6M-entry
+    ``dK`` was added this way; that now goes through :class:`PatternProject`.)
     """
 
     def __init__(self) -> None:
@@ -162,8 +163,8 @@ def _positions(K: sp.csr_matrix, M: sp.csr_matrix) -> np.ndarray | None:
     valued its position + 1, plus ``M``'s entries valued ``2^40``; where the sum exceeds
     ``2^40``, ``M`` has an entry at position ``sum - 2^40 - 1``, in ``M``'s (row-major)
     order. Exact in float64 up to ``2^40`` entries. Restricted to ``M``'s rows, the cost
-    follows ``M`` (the contact curvature touches a few thousand rows of 1.2M, the nodal
-    elimination a few hundred thousand), not all of ``K``.
+    follows ``M`` (the contact curvature touches a few tens of thousands of rows of 1.2M),
+    not all of ``K``.
     """
     rows = np.flatnonzero(np.diff(M.indptr))
     if not len(rows):
