@@ -66,3 +66,22 @@ def test_default_glibc_mmaps_large_arrays_and_opt_out() -> None:
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          check=True).stdout.split()
     assert int(out[0]) >= 200_000_000 and out[1] == "False"
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as fh:
+        return next(int(ln.split()[1]) for ln in fh if ln.startswith("VmRSS")) / 1024
+
+
+@glibc
+def test_release_gives_the_kept_memory_back(monkeypatch) -> None:
+    """Freed heap stays resident until :func:`heap.release_free_memory`, which returns it."""
+    monkeypatch.delenv(heap.OPT_OUT, raising=False)
+    heap.keep_large_arrays_mapped()
+    a = np.ones(25_000_000)  # 200 MB, touched
+    with_array = _rss_mb()
+    del a
+    kept = _rss_mb()
+    assert kept > with_array - 50  # still resident
+    assert heap.release_free_memory()
+    assert _rss_mb() < kept - 150

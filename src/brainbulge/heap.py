@@ -36,6 +36,18 @@ TRIM_THRESHOLD = (1 << 31) - 1
 OPT_OUT = "BRAINBULGE_KEEP_HEAP"
 
 
+def _libc():
+    """glibc through ctypes, or None (another C library or system)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallopt, libc.malloc_trim  # noqa: B018 - glibc has both, musl neither
+    except (OSError, AttributeError):
+        return None
+    return libc
+
+
 def keep_large_arrays_mapped(
     mmap_threshold: int = MMAP_THRESHOLD, trim_threshold: int = TRIM_THRESHOLD
 ) -> bool:
@@ -45,16 +57,28 @@ def keep_large_arrays_mapped(
     chose glibc's own ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_`` or set
     ``BRAINBULGE_KEEP_HEAP=0``.
     """
-    if not sys.platform.startswith("linux") or os.environ.get(OPT_OUT, "1") == "0":
+    if os.environ.get(OPT_OUT, "1") == "0":
         return False
     if "MALLOC_MMAP_THRESHOLD_" in os.environ or "MALLOC_TRIM_THRESHOLD_" in os.environ:
         return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):  # not glibc (musl has no mallopt)
+    libc = _libc()
+    if libc is None:
         return False
+    mallopt = libc.mallopt
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
     ok = mallopt(M_MMAP_THRESHOLD, int(mmap_threshold)) == 1
     return mallopt(M_TRIM_THRESHOLD, int(trim_threshold)) == 1 and ok
+
+
+def release_free_memory() -> bool:
+    """Give the heap's free pages back to the system (glibc ``malloc_trim(0)``, which also
+    releases whole free pages inside the heap): where a phase's work arrays are done with,
+    e.g. the solver's before the outputs, so that they do not add to the next phase's peak.
+    Returns whether memory was released."""
+    libc = _libc()
+    if libc is None:
+        return False
+    libc.malloc_trim.argtypes = (ctypes.c_size_t,)
+    libc.malloc_trim.restype = ctypes.c_int
+    return libc.malloc_trim(0) == 1

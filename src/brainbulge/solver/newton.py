@@ -30,6 +30,7 @@ import scipy.sparse as sp
 from tqdm.auto import tqdm
 
 from brainbulge.errors import ConvergenceError, InfeasibleError, InputError
+from brainbulge.heap import release_free_memory
 from brainbulge.model.problem import Problem
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.mixed import MixedForm
@@ -196,12 +197,14 @@ class NewtonSolver:
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (AMG hierarchies, factorisations) after the
         last solve, before the outputs are evaluated: the 3D output stage otherwise stacks
-        its memory on top of the solver's (a later solve rebuilds them)."""
+        its memory on top of the solver's (a later solve rebuilds them). The heap's free
+        pages go back to the system too (:func:`brainbulge.heap.release_free_memory`)."""
         release = getattr(self.linear, "release", None)
         if release is not None:
             release()
         self.last_linear_solution = None
         self._new_plans()
+        release_free_memory()
 
     def _new_plans(self) -> None:
         """The tangent's pattern is the same at every iteration: it is sliced and added to
