@@ -45,37 +45,39 @@ VARIANTS = {
 }
 
 
-def cached_mesh(target_tets: int, cache: Path):
-    """The ICBM152 brain mesh of about ``target_tets`` tets, built once into ``cache``."""
+def cached_mesh(target_tets: int, cache: Path, refine: int = 0):
+    """The ICBM152 brain mesh of about ``target_tets`` tets (Netgen at ``target_tets /
+    8**refine``, refined ``refine`` times), built once into ``cache``."""
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
 
-    path = cache / f"brain_{target_tets}" / "brain.npz"
+    path = cache / (f"brain_{target_tets}" + (f"_r{refine}" if refine else "")) / "brain.npz"
     if path.is_file():
         return load_brain_mesh(path)
-    bm = build_brain_mesh(target_tets=target_tets)
+    bm = build_brain_mesh(target_tets=target_tets, refinements=refine)
     save_brain_mesh(bm, path.parent, figures=False)
     return bm
 
 
 def one(target_tets: int, steps: int, cache: Path, variant: str,
         edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False,
-        coarse_tets: int = 100_000) -> dict:
+        coarse_tets: int = 100_000, refine: int = 0) -> dict:
     import logging
 
     from brainbulge.errors import ConvergenceError
     from brainbulge.studies.craniectomy import run_brain
 
     cache.mkdir(parents=True, exist_ok=True)
+    tag = f"{target_tets}_r{refine}" if refine else str(target_tets)
     logging.basicConfig(  # per-iteration residuals and Krylov counts, for a slow run
-        level=logging.DEBUG, filename=cache / f"run_{target_tets}_{variant}.log", filemode="w",
+        level=logging.DEBUG, filename=cache / f"run_{tag}_{variant}.log", filemode="w",
         format="%(asctime)s %(name)s %(message)s")
     for noisy in ("matplotlib", "PIL"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     t0 = time.perf_counter()
-    bm = cached_mesh(target_tets, cache)
+    bm = cached_mesh(target_tets, cache, refine)
     coarse = cached_mesh(coarse_tets, cache) if variant == "sequenced" else None
     t_mesh = time.perf_counter() - t0
-    out = cache / f"run_{target_tets}_{variant}"
+    out = cache / f"run_{tag}_{variant}"
     restart = out / "restart.npz"  # left by a run that was stopped
     resumed_at = 0.0
     if restart.is_file() and resume:
@@ -131,6 +133,9 @@ def main() -> int:
                              "command's --skull-edge-radius)")
     parser.add_argument("--coarse-tets", type=int, default=100_000,
                         help="coarse mesh of the sequenced variant (about this many tets)")
+    parser.add_argument("--refine", type=int, default=0, metavar="K",
+                        help="fine meshes by K uniform refinements of Netgen's mesh at N / 8^K "
+                             "(with --coarse-tets N / 8^K the sequenced meshes are nested)")
     parser.add_argument("--resume", action="store_true",
                         help="continue a stopped run from its restart file (CACHE/run_N_VARIANT/"
                              "restart.npz); the times then cover only this part")
@@ -138,7 +143,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.one:
         r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius,
-                args.resume, args.coarse_tets)
+                args.resume, args.coarse_tets, args.refine)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
@@ -146,8 +151,8 @@ def main() -> int:
     for n, variant in ((n, v) for n in args.sizes for v in args.variants):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
                "--cache", str(args.cache), "--variants", variant,
-               "--edge-radius", str(args.edge_radius), "--coarse-tets", str(args.coarse_tets)
-               ] + (["--resume"] if args.resume else [])
+               "--edge-radius", str(args.edge_radius), "--coarse-tets", str(args.coarse_tets),
+               "--refine", str(args.refine)] + (["--resume"] if args.resume else [])
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:

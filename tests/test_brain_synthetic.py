@@ -215,3 +215,27 @@ def test_cli_mesh_on_user_labels(tmp_path, capsys) -> None:
     code = cli_main(["mesh", "--out", str(tmp_path / "o2"), "--labels", str(bad)])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.startswith("error: cannot read") and "\n" not in err
+
+
+def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
+    """``refinements=1``: Netgen's mesh at a size of 1/8, refined: its nodes come first and
+    unchanged, eight times the tets, the new surface nodes on the skull's inner surface, the
+    tissue volumes those of the image as on a mesh built directly."""
+    coarse = build_brain_mesh(synthetic_image, target_tets=4_000, brain_volume_ml=400.0)
+    fine = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,
+                            refinements=1)
+    assert len(fine.tets) == 8 * len(coarse.tets)
+    assert np.array_equal(fine.nodes_mm[: len(coarse.nodes_mm)], coarse.nodes_mm)
+    assert fine.quality()["inverted_tets"] == 0
+    skull = fine.skull(None)
+    new_surface = np.setdiff1d(np.unique(fine.faces), np.arange(len(coarse.nodes_mm)))
+    gap_new = np.abs(skull.envelope_distance(fine.nodes_mm[new_surface], gradient=False)[0])
+    midpoints = fine.nodes_mm[coarse.faces].mean(axis=1)  # chord points, for scale
+    gap_chord = np.abs(skull.envelope_distance(midpoints, gradient=False)[0])
+    assert np.median(gap_new) < 1e-3 < np.median(gap_chord)
+    for tissue in ("white", "gray"):
+        ratio = fine.tissue_volumes_ml()[tissue] / fine.voxel_volumes_ml[tissue]
+        assert ratio == pytest.approx(1.0, rel=0.02)
+    assert set(fine.flaps) == set(coarse.flaps)
+    assert fine.flap_area_cm2("frontal") == pytest.approx(coarse.flap_area_cm2("frontal"),
+                                                            rel=0.1)

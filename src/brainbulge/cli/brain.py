@@ -54,6 +54,9 @@ def add_parser(sub: Any) -> None:
                    help="mesh sequencing: solve first on a mesh of about this many tets, then "
                    "finish on the fine mesh from its solution (MINI; e.g. tets / 14 for "
                    "meshes of a million tets and more)")
+    p.add_argument("--refine", type=int, default=0,
+                   help="mesh at tets / 8^K and refine it uniformly K times (0-3); with "
+                   "--coarse-tets tets / 8^K the sequencing meshes are nested")
     p.add_argument("--coarse-mesh", default=None,
                    help="mesh sequencing with this brain.npz as the coarse mesh (with --mesh)")
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")
@@ -86,6 +89,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "edge_radius_mm": args.skull_edge_radius,
         "coarse_tets": args.coarse_tets,
         "coarse_mesh": args.coarse_mesh,
+        "refine": args.refine,
     }
 
 

@@ -43,6 +43,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="cut plane of the fixed base [mm, world z] (default: 12%% of the height)")
     p.add_argument("--csf-layer", type=float, default=1.5,
                    help="CSF layer between brain and skull [mm] (default 1.5)")
+    p.add_argument("--refine", type=int, default=0, metavar="K",
+                   help="mesh at tets / 8^K, then refine uniformly K times (0-3; default 0)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_output_options(p, "brain-mesh")
     p.set_defaults(func=run)
@@ -63,13 +65,13 @@ def run(args: argparse.Namespace) -> int:
         "labels": args.labels, "label_map": args.label_map, "tets": args.tets,
         "brain_volume_ml": args.brain_volume, "flap": args.flap,
         "flap_centre_mm": args.flap_centre, "flap_diameter_mm": args.flap_diameter,
-        "base_z_mm": args.base_z, "csf_layer_mm": args.csf_layer}}
+        "base_z_mm": args.base_z, "csf_layer_mm": args.csf_layer, "refine": args.refine}}
     out = start_run(args, config)
     mesh = build_brain_mesh(
         image, target_tets=args.tets, brain_volume_ml=args.brain_volume,
         csf_layer_mm=args.csf_layer, base_z_mm=args.base_z,
         custom_flap_centre_mm=tuple(args.flap_centre) if args.flap_centre else None,
-        custom_flap_diameter_mm=args.flap_diameter,
+        custom_flap_diameter_mm=args.flap_diameter, refinements=args.refine,
     )
     save_brain_mesh(mesh, out, flap=args.flap, figures=not args.no_figures)
     q = mesh.quality()

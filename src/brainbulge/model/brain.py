@@ -64,6 +64,10 @@ class CraniectomyCase:
             first on a mesh of about this many tets of the same geometry, then start the fine
             mesh's Newton at full load from its solution (MINI only; fewer fine iterations).
         coarse_mesh: the same with a ``brain.npz`` as the coarse mesh (with ``mesh``).
+        refine: build the mesh at about ``tets / 8**refine`` tets and refine it uniformly
+            ``refine`` times (new surface nodes on the skull's inner surface). With
+            ``coarse_tets = tets / 8**refine`` the coarse mesh of sequencing is the unrefined
+            one: the meshes are nested and the coarse solution carries over exactly.
         name: label of the scenario.
     """
 
@@ -87,6 +91,7 @@ class CraniectomyCase:
     edge_exclusion_mm: float = 5.0
     coarse_tets: int | None = None
     coarse_mesh: str | None = None
+    refine: int = 0
     name: str = ""
     extra: dict = field(default_factory=dict)
 
@@ -129,6 +134,11 @@ class CraniectomyCase:
                 raise InputError(
                     f"--mesh fixes the geometry, so {', '.join(given)} would be ignored; drop "
                     "them, or build a mesh with them by `brainbulge mesh` and pass that")
+        if not (isinstance(self.refine, int) and 0 <= self.refine <= 3):
+            raise InputError(f"refine = {self.refine!r} must be 0, 1, 2 or 3")
+        if self.refine and self.mesh is not None:
+            raise InputError("--refine applies to a mesh built here, not to --mesh: build a "
+                             "refined one with `brainbulge mesh --refine` and pass that")
         self._check_sequencing()
         if self.fibres is not None and not Path(self.fibres).is_file():
             raise InputError(f"fibre image {self.fibres} does not exist")
@@ -174,7 +184,8 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
             if case.flap_diameter_mm is not None:
                 kwargs["custom_flap_diameter_mm"] = case.flap_diameter_mm
         bm = build_brain_mesh(image, target_tets=case.tets,
-                              brain_volume_ml=case.brain_volume_ml, **kwargs)
+                              brain_volume_ml=case.brain_volume_ml, refinements=case.refine,
+                              **kwargs)
     if case.flap != "none" and case.flap not in bm.flaps:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
                          f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
@@ -188,7 +199,7 @@ def coarse_brain_mesh_for(case: CraniectomyCase) -> BrainMesh | None:
     if case.coarse_mesh is not None:
         coarse = replace(case, mesh=case.coarse_mesh, coarse_mesh=None)
     else:
-        coarse = replace(case, tets=case.coarse_tets, coarse_tets=None)
+        coarse = replace(case, tets=case.coarse_tets, coarse_tets=None, refine=0)
     return brain_mesh_for(coarse)
 
 

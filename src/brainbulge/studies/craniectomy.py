@@ -318,7 +318,7 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any]) -> Path:
     if common.get("mesh"):
         return Path(common["mesh"])
     keys = ("tets", "labels", "label_map", "brain_volume_ml", "flap_centre_mm",
-            "flap_diameter_mm")
+            "flap_diameter_mm", "refine")
     spec = {k: common.get(k) for k in keys}
     spec = json.loads(json.dumps(spec))  # tuples -> lists, as read back
     spec_path = path.parent / "spec.json"

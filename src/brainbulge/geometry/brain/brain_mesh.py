@@ -7,6 +7,7 @@ surface with base, skull and flaps. All lengths are world millimetres (RAS+), vo
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -25,6 +26,7 @@ from brainbulge.geometry.brain.boundaries import (
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
 from brainbulge.geometry.brain.labels import TISSUES, TissueImage
 from brainbulge.geometry.brain.quality import quality_stats
+from brainbulge.geometry.brain.refine import move_onto_surface, refine_uniformly
 from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane, tag_tissue
 from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM, RigidSkull
 from brainbulge.geometry.brain.tetmesh import (
@@ -32,6 +34,8 @@ from brainbulge.geometry.brain.tetmesh import (
     mesh_intracranial_volume,
     tet_volumes_mm3,
 )
+
+log = logging.getLogger("brainbulge")
 
 #: Fraction of the envelope's inferior-superior extent below the default base cut plane:
 #: 0.12 puts it at z = -54 mm in MNI space, about the foramen magnum.
@@ -134,6 +138,7 @@ def build_brain_mesh(
     custom_flap_centre_mm: tuple[float, float, float] | None = None,
     custom_flap_diameter_mm: float = UNILATERAL_DIAMETER_MM,
     frontal_area_ratio: float = 2.0,
+    refinements: int = 0,
 ) -> BrainMesh:
     """Build the labelled brain mesh (see module docstring).
 
@@ -143,7 +148,10 @@ def build_brain_mesh(
     and skull; ``base_z_mm``: cut plane of the fixed base (default: 12 % of the height above the
     lowest point); ``midsagittal``: the left/right plane (default x = 0 for the template, else
     through the brain centroid). Flaps ``frontal``, ``left``, ``right`` are always made, and
-    ``custom`` when its centre is given.
+    ``custom`` when its centre is given. ``refinements``: Netgen meshes at about
+    ``target_tets / 8**refinements`` tets, which is then refined uniformly that many times
+    (:mod:`refine`: new surface nodes on the envelope), so that mesh sequencing can start
+    from the exact coarse solution; tissues, sides and flaps are tagged on the final mesh.
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -169,10 +177,16 @@ def build_brain_mesh(
             midsagittal.normal)
     timings["envelope"] = time.perf_counter() - t0
 
+    if not (isinstance(refinements, int) and 0 <= refinements <= 3):
+        raise InputError(f"refinements = {refinements!r} must be 0, 1, 2 or 3")
     t0 = time.perf_counter()
-    h_mm = element_size_for(envelope.volume_ml(), target_tets)
+    h_mm = element_size_for(envelope.volume_ml(), target_tets / 8**refinements)
     nodes, tets = mesh_intracranial_volume(envelope, h_mm)
     timings["tetmesh"] = time.perf_counter() - t0
+    if refinements:
+        t0 = time.perf_counter()
+        nodes, tets = refined_on_envelope(nodes, tets, envelope, refinements)
+        timings["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     tissue = tag_tissue(image, nodes, tets, intracranial_volume_ml=envelope.volume_ml(),
@@ -197,6 +211,23 @@ def build_brain_mesh(
     mesh.timings_s = timings
     check_brain_mesh(mesh)
     return mesh
+
+
+def refined_on_envelope(nodes: np.ndarray, tets: np.ndarray, envelope: IntracranialEnvelope,
+                        refinements: int) -> tuple[np.ndarray, np.ndarray]:
+    """``refinements`` uniform refinements of ``(nodes, tets)`` (mm), each followed by moving
+    the new surface nodes onto the envelope (:mod:`refine`)."""
+    skull = RigidSkull(envelope, None)
+    for _ in range(refinements):
+        n_old = len(nodes)
+        nodes, tets, _, _ = refine_uniformly(nodes, tets)
+        faces, _ = boundary_faces(tets)
+        surface_new = np.unique(faces)
+        surface_new = surface_new[surface_new >= n_old]
+        nodes, stayed = move_onto_surface(nodes, tets, surface_new, skull.envelope_distance)
+        log.info("refined: %d tets, %d new surface nodes moved onto the envelope (%d kept at "
+                 "their midpoint)", len(tets), len(surface_new) - stayed, stayed)
+    return nodes, tets
 
 
 def _component_nearest(faces: np.ndarray, mask: np.ndarray, centroids: np.ndarray,
