@@ -9,6 +9,11 @@ a 69M-double array (0.55 GB) into a new array took 1.7-5.5 s, into a touched buf
 puts blocks up to 1 GiB on the heap, ``mallopt(M_TRIM_THRESHOLD, 2 GiB)`` keeps up to 2 GiB
 of freed heap mapped, so a new array of a size seen before reuses touched pages.
 
+Opt-in (``BRAINBULGE_KEEP_HEAP=1``, read when brainbulge is imported): at 1.54M tets it
+made the solve 8 % faster (1,166 s against 1,263 s, the end game's Newton iterations ~50 s
+against ~70 s) but the kept pages raised the peak from 10,407 to 12,535 MiB, above the
+12 GiB the 2-core / 24 GiB machine is meant to stay under (docs/performance.md).
+
 No library exposes ``mallopt`` (NumPy allocates through ``malloc``), hence the few lines of
 ctypes. The glibc environment variables ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_``
 do the same but are read when the process starts, too late for a Python package.
@@ -32,8 +37,8 @@ MMAP_THRESHOLD = 1 << 30
 #: takes a C int).
 TRIM_THRESHOLD = (1 << 31) - 1
 
-#: Environment variable that switches this off (``BRAINBULGE_KEEP_HEAP=0``).
-OPT_OUT = "BRAINBULGE_KEEP_HEAP"
+#: Environment variable that switches this on at import (``BRAINBULGE_KEEP_HEAP=1``).
+OPT_IN = "BRAINBULGE_KEEP_HEAP"
 
 
 def _libc():
@@ -54,11 +59,8 @@ def keep_large_arrays_mapped(
     """Set glibc's mmap and trim thresholds (bytes) for this process.
 
     Returns whether they were set: not on other C libraries or systems, not when the user
-    chose glibc's own ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_`` or set
-    ``BRAINBULGE_KEEP_HEAP=0``.
+    chose glibc's own ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_``.
     """
-    if os.environ.get(OPT_OUT, "1") == "0":
-        return False
     if "MALLOC_MMAP_THRESHOLD_" in os.environ or "MALLOC_TRIM_THRESHOLD_" in os.environ:
         return False
     libc = _libc()
