@@ -239,3 +239,21 @@ def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
     assert set(fine.flaps) == set(coarse.flaps)
     assert fine.flap_area_cm2("frontal") == pytest.approx(coarse.flap_area_cm2("frontal"),
                                                             rel=0.1)
+
+
+def test_cli_mesh_refine(tmp_path, capsys) -> None:
+    """``brainbulge mesh --refine 1``: eight times Netgen's tets, recorded in mesh.json."""
+    import json
+
+    labels, affine = synthetic_labels(seed=5)
+    path = tmp_path / "aseg.nii.gz"
+    nib.save(nib.Nifti1Image(labels, affine), str(path))
+    runs = {}
+    for refine in ("0", "1"):
+        out = tmp_path / f"r{refine}"
+        code = cli_main(["mesh", "--out", str(out), "--labels", str(path), "--label-map",
+                         "aseg", "--tets", "6000" if refine == "0" else "48000", "--refine",
+                         refine, "--no-figures"])
+        assert code == 0, capsys.readouterr().err
+        runs[refine] = json.loads((out / "mesh.json").read_text())["tets"]
+    assert runs["1"] == 8 * runs["0"]

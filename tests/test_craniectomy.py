@@ -282,6 +282,8 @@ def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_pat
         ({"coarse_tets": 5000, "element": "taylor-hood"}, "needs --element mini"),
         ({"coarse_mesh": "missing/brain.npz"}, "does not exist"),
         ({"coarse_tets": 5000, "coarse_mesh": "missing/brain.npz"}, "not both"),
+        ({"refine": 4}, "must be 0, 1, 2 or 3"),
+        ({"refine": 1.0}, "must be 0, 1, 2 or 3"),
     ],
 )
 def test_mesh_sequencing_inputs_are_checked(options, message) -> None:
@@ -301,3 +303,13 @@ def test_a_coarse_mesh_of_another_brain_is_refused(symmetric_brain, tmp_path) ->
     with pytest.raises(InputError, match="not of the same brain"):
         run_brain({"flap": "frontal", "swell": "left", "steps": 2}, tmp_path,
                   brain_mesh=symmetric_brain, coarse_brain_mesh=bigger)
+
+
+def test_refine_is_refused_next_to_a_given_mesh(tmp_path) -> None:
+    from brainbulge.errors import InputError
+    from brainbulge.model.brain import CraniectomyCase
+
+    mesh = tmp_path / "brain.npz"
+    mesh.write_bytes(b"")  # only its existence is checked here
+    with pytest.raises(InputError, match="applies to a mesh built here"):
+        CraniectomyCase(mesh=str(mesh), refine=1)
