@@ -17,6 +17,11 @@ Variants (the same mesh, model and outputs):
   Newton started at full load from that solution. Its solve time includes the coarse stage;
   its Newton iterations are the fine mesh's.
 
+``--refine K`` builds the fine meshes by Netgen at N / 8^K and K uniform refinements
+(cached as ``brain_N_rK``); with ``--coarse-tets N / 8^K`` the sequenced variant's meshes
+are nested. ``BRAINBULGE_KEEP_HEAP=1`` in the environment keeps freed arrays on the heap
+(``brainbulge.heap``: faster, more memory).
+
 The table gives tets, DOFs, mesh time, solve time (assembly / linear solve), the whole run
 with its outputs, Newton and Krylov iterations, peak resident memory, the midline shift, the
 bulge volume and the penetration; then, per size with a baseline, each variant's speed-up

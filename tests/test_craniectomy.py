@@ -218,6 +218,10 @@ def test_study_resume_refuses_a_mesh_built_for_other_options(tmp_path) -> None:
     assert prepare_study_mesh(tmp_path, common) == mesh_dir / "brain.npz"
     with pytest.raises(InputError, match="same mesh options"):
         prepare_study_mesh(tmp_path, {**common, "tets": 100000})
+    # a spec written before --refine existed stands for refine 0
+    assert prepare_study_mesh(tmp_path, {**common, "refine": 0}) == mesh_dir / "brain.npz"
+    with pytest.raises(InputError, match="same mesh options"):
+        prepare_study_mesh(tmp_path, {**common, "refine": 1})
 
 
 def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_path,

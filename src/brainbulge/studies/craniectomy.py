@@ -320,10 +320,12 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any]) -> Path:
     keys = ("tets", "labels", "label_map", "brain_volume_ml", "flap_centre_mm",
             "flap_diameter_mm", "refine")
     spec = {k: common.get(k) for k in keys}
+    spec["refine"] = spec["refine"] or None  # 0 and absent alike: a mesh made before --refine
     spec = json.loads(json.dumps(spec))  # tuples -> lists, as read back
     spec_path = path.parent / "spec.json"
     if path.is_file():
-        if spec_path.is_file() and json.loads(spec_path.read_text()) != spec:
+        stored = json.loads(spec_path.read_text()) if spec_path.is_file() else spec
+        if {k: stored.get(k) for k in keys} != spec:
             raise InputError(
                 f"the study's mesh {path} was built for {spec_path.read_text().strip()}; "
                 "resume with the same mesh options or pass --overwrite"
