@@ -19,8 +19,8 @@ Variants (the same mesh, model and outputs):
 
 ``--refine K`` builds the fine meshes by Netgen at N / 8^K and K uniform refinements
 (cached as ``brain_N_rK``); with ``--coarse-tets N / 8^K`` the sequenced variant's meshes
-are nested. ``BRAINBULGE_KEEP_HEAP=1`` in the environment keeps freed arrays on the heap
-(``brainbulge.heap``: faster, more memory).
+are nested. ``BRAINBULGE_KEEP_HEAP=0`` in the environment returns freed arrays to the system
+(glibc's default; ``brainbulge.heap`` keeps them: faster, a little more memory).
 
 The table gives tets, DOFs, mesh time, solve time (assembly / linear solve), the whole run
 with its outputs, Newton and Krylov iterations, peak resident memory, the midline shift, the

@@ -9,10 +9,10 @@ a 69M-double array (0.55 GB) into a new array took 1.7-5.5 s, into a touched buf
 puts blocks up to 1 GiB on the heap, ``mallopt(M_TRIM_THRESHOLD, 2 GiB)`` keeps up to 2 GiB
 of freed heap mapped, so a new array of a size seen before reuses touched pages.
 
-Opt-in (``BRAINBULGE_KEEP_HEAP=1``, read when brainbulge is imported): at 1.54M tets it
-made the solve 8 % faster (1,166 s against 1,263 s, the end game's Newton iterations ~50 s
-against ~70 s) but the kept pages raised the peak from 10,407 to 12,535 MiB, above the
-12 GiB the 2-core / 24 GiB machine is meant to stay under (docs/performance.md).
+On by default when brainbulge is imported (``BRAINBULGE_KEEP_HEAP=0`` switches it off). At
+1.54M tets, with GMRES keeping only its basis: solve 853 s against 1,145 s, peak 10,784
+against 10,421 MiB (docs/performance.md). With GMRES's preconditioned basis still kept it
+had raised the peak to 12,535 MiB.
 
 No library exposes ``mallopt`` (NumPy allocates through ``malloc``), hence the few lines of
 ctypes. The glibc environment variables ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_``
@@ -37,8 +37,8 @@ MMAP_THRESHOLD = 1 << 30
 #: takes a C int).
 TRIM_THRESHOLD = (1 << 31) - 1
 
-#: Environment variable that switches this on at import (``BRAINBULGE_KEEP_HEAP=1``).
-OPT_IN = "BRAINBULGE_KEEP_HEAP"
+#: Environment variable that switches this off at import (``BRAINBULGE_KEEP_HEAP=0``).
+OPT_OUT = "BRAINBULGE_KEEP_HEAP"
 
 
 def _libc():
