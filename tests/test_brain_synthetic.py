@@ -241,6 +241,13 @@ def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
                                                             rel=0.1)
 
 
+def test_too_coarse_a_mesh_to_refine_is_refused(synthetic_image) -> None:
+    from brainbulge.errors import InputError
+
+    with pytest.raises(InputError, match="fewer refinements or more tets"):
+        build_brain_mesh(synthetic_image, target_tets=30_000, refinements=2)
+
+
 def test_cli_mesh_refine(tmp_path, capsys) -> None:
     """``brainbulge mesh --refine 1``: eight times Netgen's tets, recorded in mesh.json."""
     import json

@@ -179,6 +179,10 @@ def build_brain_mesh(
 
     if not (isinstance(refinements, int) and 0 <= refinements <= 3):
         raise InputError(f"refinements = {refinements!r} must be 0, 1, 2 or 3")
+    if refinements and target_tets / 8**refinements < 2_000:
+        raise InputError(f"{target_tets} tets with {refinements} refinements leaves Netgen "
+                         f"{target_tets / 8**refinements:.0f} tets to make (fewer than 2000, "
+                         "too coarse for the brain): ask for fewer refinements or more tets")
     t0 = time.perf_counter()
     h_mm = element_size_for(envelope.volume_ml(), target_tets / 8**refinements)
     nodes, tets = mesh_intracranial_volume(envelope, h_mm)
