@@ -197,3 +197,62 @@ def test_penetration_is_measured_where_points_can_move() -> None:
         expected = max(0.0, float(np.max(c - pc.X[moving, 1], initial=0.0)))
         assert solver.max_penetration() == pytest.approx(expected, abs=1e-12)
         assert (expected > 0) == (contact == "ymin|xmin")
+
+
+@dataclass
+class Steeper:
+    """The same rigid body with its gap multiplied by ``k`` (``|grad g| = k``)."""
+
+    obstacle: object
+    k: float
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        g, n = self.obstacle.gap_and_normal(x)
+        return self.k * g, self.k * n
+
+
+def test_contact_pressure_is_the_force_per_area_when_the_gap_is_no_distance() -> None:
+    """A gap function whose gradient is not of unit length (the sampled skull's is up to
+    1.14 at its rounded cut edge) describes the same rigid body: the solution and the
+    reported contact pressure (force per reference area) do not change, the multiplier
+    does (by 1/k)."""
+    results = []
+    for k in (1.0, 1.5):
+        mesh, problem = _capped_ball(h=0.3, h_inclusion=A / 2, cap_deg=35)
+        skull = problem.contacts[0].obstacle
+        problem = Problem(mesh, problem.materials, problem.swelling,
+                          clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
+                          contacts=[Contact("outer", Steeper(skull, k))])
+        form = MixedForm(problem, element="mini")
+        assert NewtonSolver(form, SolverOptions(steps=2)).solve().converged
+        pc = form.point_contacts[0]
+        pc.update(form.gfu.vec.FV().NumPy())
+        results.append((form.gfu.vec.FV().NumPy().copy(), pc.pressure().copy(), pc.lam.copy()))
+    (x1, p1, l1), (x2, p2, l2) = results
+    on = p1 > 0.1 * p1.max()
+    assert on.sum() > 5
+    np.testing.assert_allclose(x2, x1, atol=1e-7 * np.abs(x1).max())
+    np.testing.assert_allclose(p2[on], p1[on], rtol=1e-5)
+    np.testing.assert_allclose(l2[on], l1[on] / 1.5, rtol=1e-5)
+
+
+def test_points_moved_onto_the_obstacle_land_on_it() -> None:
+    """``move_onto_obstacle`` puts the chosen points on the surface ``g = 0`` along the
+    normal, also where ``|grad g| != 1`` (one step for a plane, a few on a curved body),
+    and leaves the other points alone."""
+    for obstacle, passes in ((Steeper(Plane((1.0, 0.2, 0.1), 0.02), 1.5), 1),
+                             (Steeper(Shifted(CURVED, CURVED_OFFSET), 1.3), 3)):
+        form = _contact_form(obstacle)
+        pc = form.point_contacts[0]
+        rng = np.random.default_rng(2)
+        x = 0.05 * rng.standard_normal(form.fes.ndof)
+        pc.update(x)
+        which = (pc.g < 0) & (np.sum(pc.n**2, axis=1) > 0.25)
+        assert which.any() and (~which).any()
+        before = pc.g.copy()
+        for _ in range(passes):
+            pc.update(x)
+            pc.move_onto_obstacle(x, which)
+        pc.update(x)
+        assert np.abs(pc.g[which]).max() < 1e-8
+        np.testing.assert_array_equal(pc.g[~which], before[~which])

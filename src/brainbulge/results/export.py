@@ -86,7 +86,7 @@ def add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
         nv = len(pc.vertices)
         touching = (pc.lam[:nv] > 0) | (np.abs(pc.g[:nv]) < 1e-6 * form.h)
         status[pc.vertices] = touching.astype(float)
-        pressure[pc.vertices] = pc.lam[:nv]
+        pressure[pc.vertices] = pc.pressure()[:nv]
     vf.point_data["contact_pressure"] = pressure
     vf.point_data["contact_status"] = status
 

@@ -146,11 +146,12 @@ class PointContact:
         """Move the points ``which`` (mask) of the DOF vector ``x`` (in place) onto the
         obstacle along its normal, ``u_i <- u_i - g_i n_i / |n_i|^2`` (a Newton step on
         ``g(x_i) = 0``; the sampled skull's ``|grad g|`` is 1 only to first order, up to
-        1.14 at the rounded cut edge). Mesh vertices only (a P2 edge midpoint is not a
-        node of its own); the gaps are those of the last :meth:`update`."""
-        which = which.copy()
+        1.14 at the rounded cut edge). Mesh vertices with a normal only (a P2 edge midpoint
+        is not a node of its own); the gaps are those of the last :meth:`update`."""
+        n2 = np.sum(self.n**2, axis=1)
+        which = which & (n2 > 0)  # no normal (deep inside a thin rigid body): left alone
         which[len(self.vertices):] = False
-        move = -(np.where(which, self.g, 0.0) / np.sum(self.n**2, axis=1))[:, None] * self.n
+        move = -(np.where(which, self.g, 0.0) / np.where(which, n2, 1.0))[:, None] * self.n
         x += self.P.T @ move.ravel()
 
     def add_forces(self, R: np.ndarray, lam: np.ndarray | None = None) -> None:
@@ -216,8 +217,11 @@ class PointContact:
         return 0.5 * (H + H.transpose(0, 2, 1))
 
     def pressure(self) -> np.ndarray:
-        """Contact pressure ``lambda`` at the points [stress]."""
-        return self.lam
+        """Contact pressure at the points [stress]: the force ``A_i lambda_i n_i`` per
+        reference area, ``lambda_i |n_i|`` at the last :meth:`update` (``lambda_i`` itself
+        where ``g`` is a distance; the sampled skull's ``|grad g|`` reaches 1.14 at its
+        rounded cut edge, where the pressures are highest)."""
+        return self.lam * np.linalg.norm(self.n, axis=1)
 
     def max_penetration(self, points: np.ndarray | None = None) -> float:
         """Largest ``max(-g, 0)`` at the contact points (or the mask ``points`` of them) of

@@ -22,7 +22,10 @@ The carried-over state (:func:`interpolate_state`):
   (the pressure jumps across zones, and the two meshes' zone interfaces differ);
 - each contact point's pressure from the nearest coarse contact point (deformed positions),
   and the points that carry pressure are moved along the obstacle's normal onto it,
-  ``u_i <- u_i - g_i n_i`` (the two meshes' boundaries differ by up to ~3 mm on the brain).
+  ``u_i <- u_i - g_i n_i / |n_i|^2``, three times (the two meshes' boundaries differ by up
+  to ~3 mm on the brain; with ``u_i - g_i n_i`` alone, where the sampled skull's
+  ``|grad g|`` is 1.13, 212 of the 1.54M-tet brain's contact points were left > 0.1 mm
+  inside the skull, up to 0.70 mm).
 
 If Newton does not converge from that start, the fine mesh ramps the load from ``Js = 1``
 as without sequencing: sequencing never ends a run that the plain ramp would finish.
@@ -126,9 +129,10 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
         pvec[_vertex_dofs(new.fes.components[1 + k], verts, 1)[:, 0]] = p
     carry_contact_pressures(old, new)
     for pc in new.point_contacts:  # pressed points onto the obstacle
-        pc.update(gvec)
         pressed = pc.lam > 0
-        gvec += pc.P.T @ (-(pc.g * pressed)[:, None] * pc.n).ravel()
+        for _ in range(3):
+            pc.update(gvec)
+            pc.move_onto_obstacle(gvec, pressed)
         pc.update(gvec)
     new.set_load(old.load.Get())  # prescribed values exact again
 
