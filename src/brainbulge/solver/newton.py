@@ -861,7 +861,7 @@ def forcing_term(eta: float, ratio: float, norm: float, tolerance: float,
     what the Newton tolerance needs buys nothing), and capped at ``cap`` (:data:`ETA_MAX`).
     The cap wins over that floor: GMRES measures its residual in another norm than
     Newton's scaled one. (With the floor winning, the 1.54M-tet brain's last iteration ran
-    at 0.06 instead of 1e-4 and still converged, but a 1.28M-tet brain's Newton stalled at
+    at 0.06 instead of 1e-4 and still converged, but a 1.19M-tet brain's Newton stalled at
     |R| 1.5e-7, tolerance 1e-9: three iterations at 6e-4 lowered it by 3 %.)
     """
     eta_new = 0.9 * ratio**2
