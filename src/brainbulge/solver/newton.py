@@ -191,7 +191,6 @@ class NewtonSolver:
         self.inexact = self.opt.linear_solver == "krylov"
         self.eta = self.eta_cap = ETA_MAX
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
-        self._full_step = False
         self.last_linear_solution: np.ndarray | None = None
         self._new_plans()
 
@@ -251,11 +250,7 @@ class NewtonSolver:
 
     def tangent(self, x: ngs.BaseVector) -> sp.csr_matrix:
         """The assembled (condensed) tangent restricted to the free DOFs, with the point
-        contacts' curvature terms: of the pulling points too (the exact tangent) once the
-        line search has taken a full step, of the pressing ones only before that. (The
-        exact tangent from the start took the 1.54M-tet brain's fine stage from 12 to 10
-        Newton iterations but stopped the 2D hemidisk alpha 60 / beta 30 sliding case at
-        load 0.97, which converges with pressing points only.)"""
+        contacts' curvature terms."""
         t0 = time.perf_counter()
         with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
             self.form.a.AssembleLinearization(x)
@@ -266,7 +261,7 @@ class NewtonSolver:
         K = self._free_part(K)
         for pc in self.form.point_contacts:
             pc.update(x.FV().NumPy())
-            K = self._add_curvature(K, self._restrict_free(-pc.curvature(self._full_step)))
+            K = self._add_curvature(K, self._restrict_free(-pc.curvature()))
         self.t_assembly += time.perf_counter() - t0
         return K
 
@@ -381,7 +376,6 @@ class NewtonSolver:
         # the active set cycle and the line search halve every step)
         self._forced = [np.zeros(pc.n_points, dtype=bool) for pc in pcs]
         self.eta = self.eta_cap = ETA_MAX
-        self._full_step = False  # the last accepted line-search step was 1 (see tangent)
         renew_schur = getattr(self.linear, "renew_schur", None)
         if renew_schur is not None:  # the Krylov preconditioner's S~: once per load step
             renew_schur()
@@ -458,7 +452,6 @@ class NewtonSolver:
                     # tightening after such steps only doubled the GMRES iterations)
                     self.eta = forcing_term(self.eta, trial / norm, trial, self.tolerance,
                                             cap=self.eta_cap)
-                    self._full_step = s == 1.0
                     if s > 1 / 64:
                         short_steps, norm_before_short = 0, trial
                     else:

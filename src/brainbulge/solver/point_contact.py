@@ -173,18 +173,15 @@ class PointContact:
         )
         return (N @ self.P).tocsr()
 
-    def curvature(self, pulling: bool = True) -> sp.csr_matrix:
+    def curvature(self) -> sp.csr_matrix:
         """``P^T blockdiag(A_i lambda_i grad^2 g(x_i)) P`` over the points with a force.
 
-        With ``pulling``, every point with ``lambda_i != 0`` counts, pulling ones
-        (``lambda_i < 0``, left by the last Newton step and released by this one) too: their
-        force ``-A_i lambda_i n(x_i)`` turns with ``x_i`` as well, and leaving their term
-        out makes the tangent inconsistent (the 1.54M-tet brain's Newton iterations
-        converged linearly, at rates 0.2-0.35, once such points appeared). Without it only
-        the pressing points (``lambda_i > 0``) count: a pulling point's term has the
-        opposite sign and, far from the solution, can cost robustness (see
-        :meth:`NewtonSolver.tangent`)."""
-        on = np.flatnonzero(self.lam != 0 if pulling else self.lam > 0)
+        Every point with ``lambda_i != 0`` counts, pulling ones (``lambda_i < 0``, left by
+        the last Newton step and released by this one) too: their force ``-A_i lambda_i
+        n(x_i)`` turns with ``x_i`` as well, and leaving their term out made the tangent
+        inconsistent (the brain's Newton iterations converged linearly, at rates 0.2-0.35
+        per iteration at 1.54M tets, once such points appeared)."""
+        on = np.flatnonzero(self.lam != 0)
         d = self.dim
         blocks = (self.weights * self.lam)[on, None, None] * self.hessian(on)
         rows = (on[:, None, None] * d + np.arange(d)[None, :, None]).repeat(d, axis=2)
