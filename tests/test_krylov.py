@@ -251,7 +251,6 @@ def test_forcing_terms_follow_the_residual_ratio() -> None:
     assert forcing_term(ETA_MAX, 1e-3, 1e-3, 1e-12) == pytest.approx(0.9e-6)
     # the cap wins over the floor 0.1 tol / |R| (GMRES's norm is not Newton's)
     assert forcing_term(ETA_MAX, 1e-3, 1e-8, 1e-9) == pytest.approx(min(1e-2, ETA_MAX))
-    assert forcing_term(ETA_MAX, 1e-3, 1e-8, 1e-9, cap=1e-6) == pytest.approx(1e-6)
     assert forcing_term(0.5, 1e-6, 1.0, 1e-20) == pytest.approx(min(0.9 * 0.25, ETA_MAX))
     assert forcing_term(ETA_MAX, 0.0, 1e-30, 0.0) == ETA_MIN
 

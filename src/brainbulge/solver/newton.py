@@ -450,8 +450,8 @@ class NewtonSolver:
                     # tolerance's doing here: from one 1.54M-tet state, GMRES at 1e-7
                     # instead of 1e-4 gave the same Newton residuals to four digits;
                     # tightening after such steps only doubled the GMRES iterations)
-                    self.eta = forcing_term(self.eta, trial / norm, trial, self.tolerance,
-                                            cap=self.eta_cap)
+                    self.eta = min(self.eta_cap, forcing_term(self.eta, trial / norm, trial,
+                                                              self.tolerance))
                     if s > 1 / 64:
                         short_steps, norm_before_short = 0, trial
                     else:
@@ -852,13 +852,12 @@ ETA_MAX = 1e-4  # loosest relative tolerance of an inexact Newton solve
 ETA_MIN = 1e-10  # tightest
 
 
-def forcing_term(eta: float, ratio: float, norm: float, tolerance: float,
-                 cap: float | None = None) -> float:
+def forcing_term(eta: float, ratio: float, norm: float, tolerance: float) -> float:
     """Relative tolerance of the next inexact linear solve (Eisenstat & Walker 1996, choice 2).
 
     ``eta_k = 0.9 (|R_k| / |R_k-1|)^2``, kept above ``0.9 eta_k-1^2`` while that is above
     0.1 (no sudden over-solving), not below ``0.1 tol/|R_k|`` (a linear residual below
-    what the Newton tolerance needs buys nothing), and capped at ``cap`` (:data:`ETA_MAX`).
+    what the Newton tolerance needs buys nothing), and capped at :data:`ETA_MAX`.
     The cap wins over that floor: GMRES measures its residual in another norm than
     Newton's scaled one. (With the floor winning, the 1.54M-tet brain's last iteration ran
     at 0.06 instead of 1e-4 and still converged, but a 1.19M-tet brain's Newton stalled at
@@ -868,8 +867,7 @@ def forcing_term(eta: float, ratio: float, norm: float, tolerance: float,
     if 0.9 * eta**2 > 0.1:
         eta_new = max(eta_new, 0.9 * eta**2)
     eta_new = max(eta_new, 0.1 * tolerance / max(norm, 1e-300))
-    cap = ETA_MAX if cap is None else cap
-    return float(min(max(eta_new, ETA_MIN), cap))
+    return float(min(max(eta_new, ETA_MIN), ETA_MAX))
 
 
 def solve(
