@@ -189,3 +189,35 @@ def test_tangent_with_contact_curvature_matches_the_plain_scipy_construction() -
         ref = ref[solver.free][:, solver.free]
         assert pc.curvature().nnz > 0
         assert abs(K - ref).max() <= 1e-12 * abs(ref).max()
+
+
+def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp) -> None:
+    """From a carried-over state the tangent leaves the contact curvature out while the
+    scaled residual is above ``carried_curvature_tolerance`` (a modified Newton method) and
+    takes the exact tangent below it; the state reached is the fine ramp's."""
+    fine_ref, _ = ramp
+    coarse, fine = _forms()
+    assert NewtonSolver(coarse, OPTIONS).solve().converged
+    interpolate_state(coarse, fine)
+    probe = NewtonSolver(fine, OPTIONS)
+    tol = 0.1 * probe.scaled_norm(probe.residual(fine.gfu.vec))
+    solver = NewtonSolver(fine, SolverOptions(steps=2, carried_curvature_tolerance=tol))
+    calls: list[tuple[float, bool]] = []
+    tangent = solver.tangent
+
+    def spy(x: ngs.BaseVector):
+        calls.append((solver.history[-1][-1], solver.with_curvature))
+        return tangent(x)
+
+    solver.tangent = spy
+    assert solver.equilibrate().converged
+    assert all(on == (norm <= tol) for norm, on in calls)
+    assert {on for _, on in calls} == {False, True}
+    assert solver.with_curvature  # back to the exact tangent for later solves
+    u_ref = _vertex_u(fine_ref)
+    assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
+
+
+def test_carried_curvature_tolerance_must_be_positive() -> None:
+    with pytest.raises(InputError, match="carried_curvature_tolerance"):
+        SolverOptions(carried_curvature_tolerance=0.0)
