@@ -1,8 +1,8 @@
 """Benchmark of one 3D craniectomy scenario (left flap, both-sided swelling, Js 1 -> 1.1).
 
 Run ``python benchmarks/bench_brain.py [--sizes 30000 100000 400000] [--steps 2]
-[--variants baseline direct krylov] [--edge-radius MM]``. Each (size, variant) runs in a
-fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from
+[--variants baseline direct krylov] [--edge-radius MM] [--tolerance TOL]``. Each (size,
+variant) runs in a fresh subprocess (its own peak memory): the ICBM152 mesh is built (or reused from
 ``--cache DIR``), then solved. A run stopped mid-way (killed, out of time) continues from its
 restart file with ``--resume``; without it every run starts at Js = 1.
 
@@ -65,7 +65,7 @@ def cached_mesh(target_tets: int, cache: Path, refine: int = 0):
 
 def one(target_tets: int, steps: int, cache: Path, variant: str,
         edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False,
-        coarse_tets: int = 100_000, refine: int = 0) -> dict:
+        coarse_tets: int = 100_000, refine: int = 0, tolerance: float = 1e-9) -> dict:
     import logging
 
     from brainbulge.errors import ConvergenceError
@@ -95,7 +95,8 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
     t1 = time.perf_counter()
     try:
         s = run_brain({"flap": "left", "swell": "both", "steps": steps,
-                       "edge_radius_mm": edge_radius_mm, **VARIANTS[variant]},
+                       "edge_radius_mm": edge_radius_mm, "tolerance": tolerance,
+                       **VARIANTS[variant]},
                       out, brain_mesh=bm, coarse_brain_mesh=coarse)
     except ConvergenceError:  # stopped before Js = 1.1: its partial summary is on disk
         s = json.loads((out / "summary.json").read_text())
@@ -141,6 +142,9 @@ def main() -> int:
     parser.add_argument("--refine", type=int, default=0, metavar="K",
                         help="fine meshes by K uniform refinements of Netgen's mesh at N / 8^K "
                              "(with --coarse-tets N / 8^K the sequenced meshes are nested)")
+    parser.add_argument("--tolerance", type=float, default=1e-9,
+                        help="Newton's tolerance on the scaled residual at full load, for "
+                             "every variant (the brain command's --tolerance)")
     parser.add_argument("--resume", action="store_true",
                         help="continue a stopped run from its restart file (CACHE/run_N_VARIANT/"
                              "restart.npz); the times then cover only this part")
@@ -148,7 +152,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.one:
         r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius,
-                args.resume, args.coarse_tets, args.refine)
+                args.resume, args.coarse_tets, args.refine, args.tolerance)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
@@ -157,7 +161,8 @@ def main() -> int:
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
                "--cache", str(args.cache), "--variants", variant,
                "--edge-radius", str(args.edge_radius), "--coarse-tets", str(args.coarse_tets),
-               "--refine", str(args.refine)] + (["--resume"] if args.resume else [])
+               "--refine", str(args.refine), "--tolerance", str(args.tolerance)]
+        cmd += ["--resume"] if args.resume else []
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:

@@ -41,6 +41,7 @@ BAD = [
     (["brain", "--material", "jelly"], "preset"),
     (["brain", "--skull-edge-radius", "20"], "edge radius"),
     (["brain", "--edge-exclusion", "-1"], "edge exclusion"),
+    (["brain", "--tolerance", "0.1"], "tolerance"),
     (["brain", "--mesh", "missing/brain.npz"], "does not exist"),
     (["brain", "--mesh", str(ROOT), "--labels", "seg.nii.gz"], "--mesh fixes the geometry"),
     (["brain", "--fibres", "missing_V1.nii.gz"], "fibre image"),

@@ -88,6 +88,20 @@ def test_contact_and_constraint(shifts) -> None:
         assert abs(s["integral_J_minus_Js"]) < 1e-6 * s["brain_volume_ml"] * 1000
 
 
+def test_a_looser_tolerance_stops_sooner_at_the_same_state(symmetric_brain, shifts,
+                                                          tmp_path) -> None:
+    """``tolerance`` is Newton's stopping test at full load: fewer iterations, a residual
+    below it, and summary quantities that agree with the default (1e-9) run."""
+    default = shifts["left"]
+    assert default["final_residual"] <= 1e-9
+    s = run_brain({"flap": "frontal", "swell": "left", "steps": 2, "tolerance": 1e-4},
+                  tmp_path, brain_mesh=symmetric_brain)
+    assert s["converged"] and s["final_residual"] <= 1e-4
+    assert s["newton_iterations"] < default["newton_iterations"]
+    for key in ("midline_shift_mm", "bulge_volume_ml", "max_radial_stretch"):
+        assert s[key] == pytest.approx(default[key], rel=1e-2), key
+
+
 def test_bilateral_swelling_adds_both_sides(shifts) -> None:
     one = shifts["left"]["swelling_volume_ml"] + shifts["right"]["swelling_volume_ml"]
     assert shifts["both"]["swelling_volume_ml"] == pytest.approx(one, rel=1e-9)

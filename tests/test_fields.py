@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from brainbulge.results.fields import (
+    largest_eigenvalue,
     max_principal_strain,
     output_fields,
     radial_directions,
@@ -27,6 +28,24 @@ def test_stretches_of_a_rotated_stretch() -> None:
     assert tangential_stretch(C, n, dim=3)[0] == pytest.approx(max(b, c))  # largest in plane
     assert tangential_stretch(C, n, dim=2)[0] == pytest.approx(b)  # in-plane perpendicular
     assert max_principal_strain(C)[0] == pytest.approx(0.5 * (a**2 - 1))
+
+
+@pytest.mark.parametrize("spectrum", ["random", "double-top", "double-bottom", "triple", "zero"])
+def test_largest_eigenvalue_matches_lapack(spectrum: str) -> None:
+    """The closed form against ``numpy.linalg.eigvalsh`` on rotated spectra, including
+    (nearly) repeated eigenvalues, where ``acos`` is least accurate."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    lam = {"random": rng.uniform(-2.0, 3.0, (n, 3)),
+           "double-top": np.array([0.7, 1.2, 1.2 + 1e-12]) * np.ones((n, 1)),
+           "double-bottom": np.array([0.9, 0.9, 1.4]) * np.ones((n, 1)),
+           "triple": np.full((n, 3), 1.1),
+           "zero": np.zeros((n, 3))}[spectrum]
+    Q = np.linalg.qr(rng.standard_normal((n, 3, 3)))[0]
+    A = Q @ (lam[:, :, None] * np.swapaxes(Q, 1, 2))
+    A = 0.5 * (A + np.swapaxes(A, 1, 2))
+    expected = np.linalg.eigvalsh(A)[:, -1]
+    assert np.abs(largest_eigenvalue(A) - expected).max() <= 1e-7 * max(1.0, np.abs(lam).max())
 
 
 def test_tangential_stretch_3d_oblique_direction() -> None:

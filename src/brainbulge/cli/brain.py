@@ -47,6 +47,8 @@ def add_parser(sub: Any) -> None:
                    help="4D NIfTI (nx, ny, nz, 3) of axon directions, e.g. DTI V1, in world "
                    "axes (default: radial from the brain's centre)")
     p.add_argument("--steps", type=int, default=4, help="initial number of load steps")
+    p.add_argument("--tolerance", type=positive_float("--tolerance"), default=1e-9,
+                   help="Newton's tolerance on the scaled residual at full load (default 1e-9)")
     p.add_argument("--element", choices=("mini", "taylor-hood"), default="mini")
     p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="pardiso",
                    help="direct, or GMRES with AMG blocks for large meshes (MINI)")
@@ -82,6 +84,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "flap_diameter_mm": args.flap_diameter,
         "fibres": args.fibres,
         "steps": args.steps,
+        "tolerance": args.tolerance,
         "element": args.element,
         "linear_solver": args.linear_solver,
         "material": args.material,

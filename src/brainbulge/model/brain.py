@@ -57,6 +57,8 @@ class CraniectomyCase:
         linear_solver: ``pardiso`` (direct) or ``krylov`` (GMRES + AMG blocks, MINI only,
             for large meshes).
         steps: initial load steps.
+        tolerance: Newton's stopping tolerance at full load, on the scaled residual (force /
+            (mu L^2), volume / |Omega|; :class:`~brainbulge.solver.SolverOptions`) [-].
         compile: compile the energy to machine code (a one-off ~10 s; assembly ~3.5x faster).
         edge_radius_mm: radius of the rounded cut edge of the skull at the flap [mm].
         edge_exclusion_mm: band around the flap rim left out of ``max_*`` outputs [mm].
@@ -86,6 +88,7 @@ class CraniectomyCase:
     element: str = "mini"
     linear_solver: str = "pardiso"
     steps: int = 4
+    tolerance: float = 1e-9
     compile: bool = True
     edge_radius_mm: float = EDGE_RADIUS_MM
     edge_exclusion_mm: float = 5.0
@@ -112,6 +115,8 @@ class CraniectomyCase:
             raise InputError("the krylov linear solver needs --element mini")
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
+        if not (isinstance(self.tolerance, (int, float)) and 0 < self.tolerance <= 1e-3):
+            raise InputError(f"tolerance = {self.tolerance!r} must lie in (0, 1e-3] (default 1e-9)")
         if not (isinstance(self.tets, int) and 1_000 <= self.tets <= 5_000_000):
             raise InputError(f"tets = {self.tets!r} must be a whole number in [1000, 5000000]")
         if self.element not in ("mini", "taylor-hood"):

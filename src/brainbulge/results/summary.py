@@ -111,6 +111,7 @@ def solution_summary(
         "load_steps": len(sol.steps),
         "rejected_steps": sol.rejected_steps,
         "newton_iterations": sol.newton_iterations,
+        "final_residual": sol.steps[-1].residual if sol.steps else None,
         "wall_time_s": round(sol.wall_time_s, 3),
         "assembly_time_s": round(sol.assembly_time_s, 3),
         "linear_solve_time_s": round(sol.solve_time_s, 3),

@@ -106,7 +106,7 @@ def run_brain(
     mesh_hash = hashlib.sha1(np.ascontiguousarray(bm.nodes_mm).tobytes()
                              + np.ascontiguousarray(bm.tets).tobytes()).hexdigest()
     key = json.dumps([inputs, mesh_hash], sort_keys=True, default=str)
-    options = SolverOptions(steps=case.steps, progress=progress,
+    options = SolverOptions(steps=case.steps, tolerance=case.tolerance, progress=progress,
                             linear_solver=case.linear_solver, checkpoint=restart,
                             checkpoint_key=key)
     sequenced = None
