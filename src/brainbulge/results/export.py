@@ -15,15 +15,14 @@ from pathlib import Path
 import meshio
 import ngsolve as ngs
 import numpy as np
-from scipy.spatial import cKDTree
 
+from brainbulge.geometry.ngsolve_arrays import (
+    element_corners,
+    element_vertices,
+    vertex_coordinates,
+)
 from brainbulge.results.fields import output_fields, sample
 from brainbulge.solver.mixed import MixedForm
-
-_REF_VERTICES = {
-    2: [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)],
-    3: [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)],
-}
 
 
 @dataclass
@@ -48,29 +47,25 @@ def vertex_fields(
     (``fibres(X)``: unit axon directions replacing the radial default)."""
     mesh = form.mesh
     dim = mesh.dim
-    points = np.array([v.point for v in mesh.vertices])[:, :dim]
-    cells = np.array([[v.nr for v in el.vertices] for el in mesh.Elements(ngs.VOL)])
+    points = vertex_coordinates(mesh)
+    cells, regions = element_vertices(mesh)
     names = list(mesh.GetMaterials())
-    regions = np.array([el.index for el in mesh.Elements(ngs.VOL)])
 
-    ref = _REF_VERTICES[dim]
-    ir = ngs.IntegrationRule([tuple(list(p) + [0.0] * (3 - dim)) for p in ref], [1.0] * len(ref))
-    mips = mesh.MapToAllElements(ir, ngs.VOL)
+    mips = element_corners(mesh)
     s = sample(form, mips)
     fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
     for name, cf in (extra or {}).items():
         fields[name] = np.asarray(cf(mips)).reshape(len(s.X), -1).squeeze()
-    # match each sampled element vertex to a mesh vertex
-    _, vid = cKDTree(points).query(s.X)
+    vid = cells.ravel()  # the sampled corners, element by element
     count = np.bincount(vid, minlength=len(points)).astype(float)
     point_data, cell_data = {}, {}
-    ncorner = len(ref)
     for name, val in fields.items():
         val = np.asarray(val, dtype=float)
-        acc = np.zeros((len(points),) + val.shape[1:])
-        np.add.at(acc, vid, val)
-        point_data[name] = acc / count.reshape((-1,) + (1,) * (val.ndim - 1))
-        cell_data[name] = val.reshape(len(cells), ncorner, *val.shape[1:]).mean(axis=1)
+        flat = val.reshape(len(vid), -1)
+        acc = np.stack([np.bincount(vid, weights=c, minlength=len(points)) for c in flat.T],
+                       axis=1)
+        point_data[name] = (acc / count[:, None]).reshape((len(points),) + val.shape[1:])
+        cell_data[name] = val.reshape(len(cells), dim + 1, *val.shape[1:]).mean(axis=1)
     cell_data["region"] = regions.astype(float)
     return VertexFields(points, cells, regions, names, point_data, cell_data)
 

@@ -110,11 +110,11 @@ def free_dofs(form) -> np.ndarray:
 def displacement_layout(form, free: np.ndarray | None = None) -> DisplacementLayout:
     """Vertex and component of every free displacement DOF of a P1(+bubble) ``form``.
 
-    Built from ``GetDofNrs`` of each vertex, so it does not rely on NGSolve's DOF ordering
-    (which for VectorH1 is: all x-components, then all y, then all z, each with the vertex
-    DOFs first).
+    Built from each vertex's DOF numbers (:func:`vertex_dofs`), so it does not rely on
+    NGSolve's DOF ordering (which for VectorH1 is: all x-components, then all y, then all z,
+    each with the vertex DOFs first).
     """
-    import ngsolve as ngs
+    from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 
     if free is None:
         free = free_dofs(form)
@@ -125,7 +125,7 @@ def displacement_layout(form, free: np.ndarray | None = None) -> DisplacementLay
     dim = mesh.dim
     vert_of = np.full(V.ndof, -1, dtype=np.int64)
     comp_of = np.full(V.ndof, -1, dtype=np.int64)
-    dofs = np.array([V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)) for v in range(mesh.nv)])
+    dofs = vertex_dofs(V, mesh)
     if dofs.shape != (mesh.nv, dim):
         raise InputError("the Krylov solver needs the MINI element (P1 + condensed bubbles)")
     vert_of[dofs] = np.arange(mesh.nv)[:, None]
@@ -134,7 +134,7 @@ def displacement_layout(form, free: np.ndarray | None = None) -> DisplacementLay
     if np.any(vert_of[free_u] < 0):
         raise InputError("the Krylov solver needs the MINI element (P1 + condensed bubbles); "
                          "use the direct solver for Taylor-Hood")
-    coords = np.array([v.point for v in mesh.vertices], dtype=float)[:, :dim]
+    coords = vertex_coordinates(mesh)
     return DisplacementLayout(coords, vert_of[free_u], comp_of[free_u])
 
 

@@ -41,11 +41,11 @@ import dataclasses
 import logging
 import time
 
-import ngsolve as ngs
 import numpy as np
 from scipy.spatial import cKDTree
 
 from brainbulge.errors import InputError
+from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates, vertex_dofs
 from brainbulge.geometry.rezone import vertex_values
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
@@ -66,19 +66,6 @@ class Sequenced:
     fine_converged: bool  # Newton from the carried-over state (else the plain ramp ran)
 
 
-def _elements(mesh: ngs.Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex numbers (n_el, dim + 1) and material index (n_el,) of the volume elements."""
-    els = list(mesh.Elements(ngs.VOL))
-    return (np.array([[v.nr for v in el.vertices] for el in els], dtype=np.int64),
-            np.array([el.index for el in els], dtype=np.int64))
-
-
-def _vertex_dofs(space: ngs.FESpace, vertices: np.ndarray, count: int) -> np.ndarray:
-    """(n, count) DOF numbers of ``space`` at ``vertices``."""
-    return np.array([space.GetDofNrs(ngs.NodeId(ngs.VERTEX, int(v)))[:count] for v in vertices],
-                    dtype=np.int64).reshape(len(vertices), count)
-
-
 def interpolate_state(old: MixedForm, new: MixedForm) -> None:
     """Carry ``(u, p, lambda)`` and the load of ``old`` over to ``new``, a mesh of the same
     reference domain (see the module docstring)."""
@@ -88,8 +75,8 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
         raise InputError("mesh sequencing needs the same regions on both meshes "
                          f"(zones {old.pressure_zones} and {new.pressure_zones})")
     mesh, dim = new.mesh, new.dim
-    X = np.array([v.point for v in mesh.vertices])[:, :dim]
-    els, mat = _elements(mesh)
+    X = vertex_coordinates(mesh)
+    els, mat = element_vertices(mesh)
     centroid = X[els].mean(axis=1)
     inward = np.empty_like(X)
     inward[els.ravel()] = np.repeat(centroid, dim + 1, axis=0)  # one element's centroid
@@ -105,9 +92,10 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
     gvec[:] = 0.0
     V = new.fes.components[0]
     uvec = new.u.vec.FV().NumPy()
-    uvec[_vertex_dofs(V, np.arange(mesh.nv), dim)] = u
-    X_old = np.array([v.point for v in old.mesh.vertices])[:, :dim]
-    els_old, mat_old = _elements(old.mesh)
+    uvec[vertex_dofs(V, mesh)] = u
+    X_old = vertex_coordinates(old.mesh)
+    els_old, mat_old = element_vertices(old.mesh)
+    located = old.mesh(*X.T)  # every fine vertex in the coarse mesh, once for all zones
     for k, zone in enumerate(new.pressure_zones):
         in_zone = np.array(mesh.Materials(zone).Mask(), dtype=bool)[mat]
         in_zone_old = np.array(old.mesh.Materials(zone).Mask(), dtype=bool)[mat_old]
@@ -115,8 +103,8 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
         verts_old = np.unique(els_old[in_zone_old])
         p_old = old.gfu.components[1 + k]
         p_nodal = p_old.vec.FV().NumPy()[
-            _vertex_dofs(old.fes.components[1 + k], verts_old, 1)[:, 0]]
-        mips = old.mesh(*X[verts].T)
+            vertex_dofs(old.fes.components[1 + k], old.mesh, in_zone_old)[verts_old, 0]]
+        mips = located[verts]
         nr = mips["nr"]
         same = (nr >= 0) & in_zone_old[np.maximum(nr, 0)]
         p = np.empty(len(verts))
@@ -126,7 +114,7 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
             _, j = cKDTree(X_old[verts_old]).query(X[verts[~same]])
             p[~same] = p_nodal[j]
         pvec = new.gfu.components[1 + k].vec.FV().NumPy()
-        pvec[_vertex_dofs(new.fes.components[1 + k], verts, 1)[:, 0]] = p
+        pvec[vertex_dofs(new.fes.components[1 + k], mesh, in_zone)[verts, 0]] = p
     carry_contact_pressures(old, new)
     for pc in new.point_contacts:  # pressed points onto the obstacle
         pressed = pc.lam > 0

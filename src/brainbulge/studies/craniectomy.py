@@ -185,8 +185,11 @@ def brain_summary(
     def near_rim(X: np.ndarray) -> np.ndarray:
         """Within ``band`` of the flap rim: the cutter surface meets the skull surface."""
         d_cut, _ = flap.cutter_distance(X)
-        phi_env, _ = skull.envelope_distance(X, gradient=False)
-        return np.hypot(d_cut, phi_env) < band
+        near = np.abs(d_cut) < band  # the skull's spline only there: hypot(d, phi) >= |d|
+        phi_env, _ = skull.envelope_distance(X[near], gradient=False)
+        out = np.zeros(len(X), dtype=bool)
+        out[near] = np.hypot(d_cut[near], phi_env) < band
+        return out
 
     out: dict[str, Any] = {
         "case": case.name,
@@ -242,12 +245,10 @@ def _fibres(case: CraniectomyCase, bm: BrainMesh):
 
 def _vertex_displacements(form: MixedForm, bm: BrainMesh) -> np.ndarray:
     """``u`` at the brain mesh nodes (mm): the P1 vertex values (NGSolve keeps the order)."""
-    import ngsolve as ngs
+    from brainbulge.geometry.ngsolve_arrays import vertex_dofs
 
-    V = form.fes.components[0]
     x = form.gfu.components[0].vec.FV().NumPy()
-    dofs = np.array([V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)) for v in range(form.mesh.nv)])
-    return x[dofs]
+    return x[vertex_dofs(form.fes.components[0], form.mesh)]
 
 
 def _mean_parenchyma_pressure(form: MixedForm) -> float:
