@@ -6,7 +6,12 @@ import pytest
 from netgen.csg import unit_cube
 from netgen.geom2d import SplineGeometry
 
-from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates, vertex_dofs
+from brainbulge.geometry.ngsolve_arrays import (
+    element_corners,
+    element_vertices,
+    vertex_coordinates,
+    vertex_dofs,
+)
 
 
 def _two_region_square() -> ngs.Mesh:
@@ -62,3 +67,11 @@ def test_vertex_dofs_of_a_space_on_some_regions():
         np.testing.assert_array_equal(dofs[verts], expected)
         off = np.setdiff1d(np.arange(mesh.nv), verts)
         assert len(off) > 0 and np.all(dofs[off] == -1)
+
+
+def test_element_corners_are_the_element_vertices_in_order(mesh):
+    """Corner k of element e is vertex ``element_vertices(mesh)[0][e, k]``."""
+    xyz = ngs.CF((ngs.x, ngs.y, ngs.z)[: mesh.dim])
+    at_corners = np.asarray(xyz(element_corners(mesh))).reshape(-1, mesh.dim + 1, mesh.dim)
+    els, _ = element_vertices(mesh)
+    np.testing.assert_allclose(at_corners, vertex_coordinates(mesh)[els], atol=1e-14)
