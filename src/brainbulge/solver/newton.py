@@ -32,6 +32,7 @@ from tqdm.auto import tqdm
 from brainbulge.errors import ConvergenceError, InfeasibleError, InputError
 from brainbulge.heap import release_free_memory
 from brainbulge.model.problem import Problem
+from brainbulge.solver.hotspot import HotspotRelaxation
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, PatternProject
@@ -85,6 +86,9 @@ class SolverOptions:
             of 1/8; 1.54M tets, 10 Newton iterations); without the term the first step is
             a full one (1.7e-2 -> 8.7e-4) and the stage takes 6. ``inf`` keeps the exact
             tangent throughout.
+        hotspot_relaxation: after an accepted Newton step whose residual sits at a few
+            vertices (MINI), solve their equations locally first (nonlinear elimination,
+            :mod:`brainbulge.solver.hotspot`), kept only when the residual falls.
     """
 
     steps: int = 5
@@ -104,6 +108,7 @@ class SolverOptions:
     stop_when: Callable[[], bool] | None = None
     stop_on_failure: Callable[[float], bool] | None = None
     carried_curvature_tolerance: float = 1e-3
+    hotspot_relaxation: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
@@ -209,6 +214,8 @@ class NewtonSolver:
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.last_linear_solution: np.ndarray | None = None
         self._new_plans()
+        self.relaxation = (HotspotRelaxation(self) if self.opt.hotspot_relaxation
+                           and HotspotRelaxation.applies(form) else None)
 
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (AMG hierarchies, factorisations) after the
@@ -484,6 +491,8 @@ class NewtonSolver:
                     else:
                         short_steps += 1
                     norm = trial
+                    if self.relaxation is not None and norm > self.tolerance:
+                        norm = self.relaxation.relax(x, norm)
                     break
                 x.data = x0
                 for pc, l0 in zip(pcs, lam0, strict=True):
