@@ -79,29 +79,49 @@ def test_relax_returns_a_displaced_vertex_to_equilibrium(state) -> None:
     assert new == pytest.approx(solver.scaled_norm(solver.res.FV().NumPy()))
 
 
-def test_local_tangent_is_the_derivative_of_the_local_residual(state) -> None:
-    form, solver, _ = state
-    x = form.gfu.vec
-    v = _displace(form, [0.3, 0.3, 0.3], [0.02, -0.01, 0.015])
+def _local_problem(form, solver, v: int) -> _LocalProblem:
+    """The local problem of the patch ``v`` + one ring, its active contact points included."""
     relaxation = HotspotRelaxation(solver)
-    relaxation.hotspot(solver.residual(x))
-    els, regions, dof_vertex, incidence, _, free_full = relaxation._maps
+    relaxation.hotspot(solver.residual(form.gfu.vec))
+    els, regions, dof_vertex, incidence, point_vertex, free_full = relaxation._maps
     patch = np.zeros(form.mesh.nv, dtype=bool)
     patch[els[incidence[:, [v]].toarray().ravel() > 0].ravel()] = True
     elements = np.flatnonzero(incidence[:, np.flatnonzero(patch)].sum(axis=1).A1 > 0)
-    local = _LocalProblem(solver, elements, regions, patch, dof_vertex, free_full)
+    contacts = [(pc, np.flatnonzero(pc.active(solver.c_active) & (pv >= 0)
+                                    & patch[np.maximum(pv, 0)]))
+                for pc, pv in zip(form.point_contacts, point_vertex, strict=True)]
+    return _LocalProblem(solver, elements, regions, patch, dof_vertex, free_full, contacts)
+
+
+@pytest.mark.parametrize("where", ["interior", "on the skull"])
+def test_local_tangent_is_the_derivative_of_the_local_residual(state, where) -> None:
+    form, solver, _ = state
+    x = form.gfu.vec
+    if where == "interior":
+        v = _displace(form, [0.3, 0.3, 0.3], [0.02, -0.01, 0.015])
+    else:
+        pc = form.point_contacts[0]
+        v = _displace(form, pc.X[np.argmax(pc.lam)], [0.003, -0.002, 0.001])
+    local = _local_problem(form, solver, v)
+    assert (local.n_lam > 0) == (where == "on the skull")
     X = x.FV().NumPy().copy()
-    R, K = local.assemble(X, tangent=True)
+    lam = local.multipliers()
+    R, K = local.assemble(X, lam, tangent=True)
     rng = np.random.default_rng(1)
-    dx = rng.standard_normal(len(local.dofs)) * 1e-6 * np.where(local.scale > 1e-3, 1, 1e3)
+    n = len(local.dofs)
+    dy = rng.standard_normal(n + local.n_lam) * 1e-6
+    dy[:n] *= np.where(local.scale > 1e-3, 1, 1e3)  # pressures ~1e3 x displacements
+    dy[n:] *= 1e3 * max(1.0, abs(lam).max(initial=0))
     Xp, Xm = X.copy(), X.copy()
-    Xp[local.dofs] += dx
-    Xm[local.dofs] -= dx
-    fd = (local.assemble(Xp, tangent=False)[0] - local.assemble(Xm, tangent=False)[0]) / 2
-    assert np.linalg.norm(fd - K @ dx) < 1e-6 * np.linalg.norm(K @ dx)
-    # the local residual is the global one at the local DOFs
+    Xp[local.dofs] += dy[:n]
+    Xm[local.dofs] -= dy[:n]
+    fd = (local.assemble(Xp, lam + dy[n:], tangent=False)[0]
+          - local.assemble(Xm, lam - dy[n:], tangent=False)[0]) / 2
+    assert np.linalg.norm(fd - K @ dy) < 1e-6 * np.linalg.norm(K @ dy)
+    # the local residual is the global one at the local DOFs (contact forces included)
     solver.residual(x)
-    assert np.allclose(R, solver.res.FV().NumPy()[local.dofs], rtol=0, atol=1e-10 * abs(R).max())
+    assert np.allclose(R[:n], solver.res.FV().NumPy()[local.dofs], rtol=0,
+                       atol=1e-10 * abs(R[:n]).max())
 
 
 def test_a_spread_residual_has_no_hotspot(state) -> None:
@@ -118,21 +138,25 @@ def test_a_spread_residual_has_no_hotspot(state) -> None:
     assert np.array_equal(x.FV().NumPy(), before) and not relaxation.records
 
 
-def test_a_vertex_pressed_on_the_skull_is_not_moved(state) -> None:
-    form, solver, _ = state
+def test_a_vertex_pressed_on_the_skull_is_relaxed_back_onto_it(state) -> None:
+    form, solver, x_conv = state
     pc = form.point_contacts[0]
-    pressed = np.flatnonzero(pc.lam > 0.5 * pc.lam.max())[0]
-    X = pc.X[pressed]
+    i = int(np.argmax(pc.lam))
+    lam_conv = pc.lam[i]
+    X = pc.X[i]
     v = _displace(form, X, -0.01 * X / np.linalg.norm(X))  # off the skull, inwards
     x = form.gfu.vec
     norm = solver.scaled_norm(solver.residual(x))
+    assert pc.g[i] > 5e-3
     relaxation = HotspotRelaxation(solver)
     assert v in relaxation.hotspot(solver.res.FV().NumPy())
-    before = x.FV().NumPy().copy()
-    relaxation.relax(x, norm)
-    assert len(relaxation.last_patch) and not relaxation.last_patch[v]
+    new = relaxation.relax(x, norm)
+    assert relaxation.records[-1].kept and relaxation.last_patch[v]
+    assert new < 1e-2 * norm
+    assert abs(pc.g[i]) < 1e-6  # back on the skull (pc.update by the residual)
+    assert pc.lam[i] == pytest.approx(lam_conv, rel=0.05)
     dofs = vertex_dofs(form.fes.components[0], form.mesh)[v]
-    assert np.array_equal(x.FV().NumPy()[dofs], before[dofs])
+    assert np.abs(x.FV().NumPy()[dofs] - x_conv[dofs]).max() < 0.02 * 0.01
 
 
 def test_a_local_result_that_raises_the_residual_is_not_kept(state, monkeypatch) -> None:
@@ -151,6 +175,9 @@ def test_a_local_result_that_raises_the_residual_is_not_kept(state, monkeypatch)
     assert relaxation.relax(x, norm) == pytest.approx(norm, rel=1e-12)
     assert not relaxation.records[-1].kept
     assert np.array_equal(x.FV().NumPy(), before)
+    kept_residual = solver.res.FV().NumPy().copy()  # restored, not evaluated again
+    assert np.allclose(kept_residual, solver.residual(x), rtol=0,
+                       atol=1e-12 * np.abs(kept_residual).max())
 
 
 def test_the_same_solution_with_and_without_relaxation(converged) -> None:

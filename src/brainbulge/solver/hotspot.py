@@ -141,11 +141,15 @@ class HotspotRelaxation:
         if hot is None:
             return norm
         els, regions, dof_vertex, incidence, point_vertex, free_full = self._maps
-        held = np.zeros(incidence.shape[1], dtype=bool)
         pcs = s.form.point_contacts
+        # contact points: active (or forced) ones keep g = 0 in the local solve, with their
+        # multiplier as an unknown; a point releasing its pressure holds its vertex fixed
+        held = np.zeros(incidence.shape[1], dtype=bool)
+        active = []
         for pc, pv, forced in zip(pcs, point_vertex, s._forced, strict=True):
-            pressing = (pc.lam > 0) | pc.active(s.c_active) | forced
-            held[pv[pressing & (pv >= 0)]] = True
+            act = (pc.active(s.c_active) | forced) & (pv >= 0)
+            active.append(act)
+            held[pv[(pc.lam != 0) & ~act & (pv >= 0)]] = True
         patch = np.zeros(incidence.shape[1], dtype=bool)
         patch[hot] = True
         for _ in range(self.rings):
@@ -156,34 +160,48 @@ class HotspotRelaxation:
         if not patch[hot].any():
             return norm
         elements = np.flatnonzero(incidence[:, np.flatnonzero(patch)].sum(axis=1).A1 > 0)
-        problem = _LocalProblem(s, elements, regions, patch, dof_vertex, free_full)
+        contacts = [(pc, np.flatnonzero(act & patch[np.maximum(pv, 0)]))
+                    for pc, pv, act in zip(pcs, point_vertex, active, strict=True)]
+        problem = _LocalProblem(s, elements, regions, patch, dof_vertex, free_full, contacts)
         self.last_dofs = problem.dofs
         X = x.FV().NumPy()
         x_saved = X.copy()
         lam_saved = [pc.lam.copy() for pc in pcs]
+        res_saved, compl_saved = s.res.FV().NumPy().copy(), s._compl
         its = problem.solve(X, target=0.01 * norm, max_iterations=self.max_iterations)
         new = s.scaled_norm(s.residual(x))
-        penetrating = any(
-            (pc.active(s.c_active) & patch[np.maximum(pv, 0)] & (pv >= 0)).any()
-            for pc, pv in zip(pcs, point_vertex, strict=True))
+        penetrating = any(  # a free point of the patch that came to press on the skull
+            (pc.active(s.c_active) & ~act & patch[np.maximum(pv, 0)] & (pv >= 0)).any()
+            for pc, pv, act in zip(pcs, point_vertex, active, strict=True))
         kept = bool(new < norm and not penetrating)
         self.records.append(RelaxationRecord(len(hot), int(patch.sum()), its, norm, new, kept))
-        log.debug("    hotspot: %d vertices, patch of %d (%d tets), %d local Newton "
-                  "iterations: |R| %.3e -> %.3e%s", len(hot), int(patch.sum()), len(elements),
-                  its, norm, new, "" if kept else ", not kept")
+        log.debug("    hotspot: %d vertices, patch of %d (%d tets, %d contact points), %d local "
+                  "Newton iterations: |R| %.3e -> %.3e%s", len(hot), int(patch.sum()),
+                  len(elements), sum(len(p) for _, p in contacts), its, norm, new,
+                  "" if kept else ", not kept")
         if kept:
             return new
-        X[:] = x_saved
+        X[:] = x_saved  # and the residual at it, without evaluating it again
         for pc, lam in zip(pcs, lam_saved, strict=True):
             pc.lam = lam
-        return s.scaled_norm(s.residual(x))
+            pc.update(X)
+        s.res.FV().NumPy()[:] = res_saved
+        s._compl = compl_saved
+        return norm
 
 
 class _LocalProblem:
-    """The equations of a patch's DOFs, assembled from its elements' matrices."""
+    """The equations of a patch's DOFs, assembled from its elements' matrices, and the
+    constraints ``g_i = 0`` of its active contact points (multipliers ``lambda_i``)::
+
+        r_x = R(x) - P^T [A_i lambda_i n_i],   r_lambda = -A_i g_i,
+        [[K - P^T (A lambda grad^2 g) P, -P^T N], [-N^T P, 0]]   (N_i = A_i n_i)
+
+    as :mod:`brainbulge.solver.point_contact` writes them for the whole body."""
 
     def __init__(self, solver, elements: np.ndarray, regions: np.ndarray, patch: np.ndarray,
-                 dof_vertex: np.ndarray, free_full: np.ndarray) -> None:
+                 dof_vertex: np.ndarray, free_full: np.ndarray,
+                 contacts: list[tuple[object, np.ndarray]] = ()) -> None:
         form = solver.form
         mesh, fes = form.mesh, form.fes
         self.solver = solver
@@ -210,11 +228,34 @@ class _LocalProblem:
         r = fes.Range(0)
         is_u[r.start : r.stop] = True
         self.scale = np.where(is_u[self.dofs], 1 / solver.force_scale, 1 / solver.volume)
+        self.volume = solver.volume
+        d = form.dim
+        self.contacts = []  # pc, its points, P at them (all DOFs, local DOFs)
+        for pc, pts in contacts:
+            rows = (pts[:, None] * d + np.arange(d)).ravel()
+            moving = np.diff(pc.P[rows][:, self.dofs].tocsr().indptr).reshape(-1, d).sum(1) > 0
+            pts = pts[moving]  # (a point with no local DOF has no equation here)
+            if len(pts):
+                rows = (pts[:, None] * d + np.arange(d)).ravel()
+                P = pc.P[rows]
+                self.contacts.append((pc, pts, P, P[:, self.dofs].tocsr()))
+        self.n_lam = sum(len(pts) for _, pts, _, _ in self.contacts)
 
-    def assemble(self, X: np.ndarray, tangent: bool) -> tuple[np.ndarray, sp.csc_matrix | None]:
-        """Local residual (and tangent) at the full state ``X``."""
+    def multipliers(self) -> np.ndarray:
+        return np.concatenate([pc.lam[pts] for pc, pts, _, _ in self.contacts] or [[]])
+
+    def set_multipliers(self, lam: np.ndarray) -> None:
+        k = 0
+        for pc, pts, _, _ in self.contacts:
+            pc.lam[pts] = lam[k : k + len(pts)]
+            k += len(pts)
+
+    def assemble(self, X: np.ndarray, lam: np.ndarray, tangent: bool
+                 ) -> tuple[np.ndarray, sp.csc_matrix | None]:
+        """Local residual ``(r_x, r_lambda)`` (and tangent) at the full state ``X`` and the
+        patch's multipliers ``lam``."""
         n = len(self.dofs)
-        R = np.zeros(n)
+        R = np.zeros(n + self.n_lam)
         rows, cols, vals = [], [], []
         for fe, tr, dofs, bfis, loc in self.items:
             xe = ngs.Vector(X[dofs])
@@ -227,42 +268,74 @@ class _LocalProblem:
                     rows.append(np.repeat(li, len(li)))
                     cols.append(np.tile(li, len(li)))
                     vals.append(Ke[np.ix_(on, on)].ravel())
+        blocks = []
+        k = n
+        for pc, pts, P, P_loc in self.contacts:
+            m, d = len(pts), pc.dim
+            x = pc.X[pts] + (P @ X).reshape(m, d)
+            g, normal = pc.obstacle.gap_and_normal(x)
+            g = g - pc.g0[pts]
+            w, lm = pc.weights[pts], lam[k - n : k - n + m]
+            R[:n] -= P_loc.T @ ((w * lm)[:, None] * normal).ravel()
+            R[k : k + m] = -w * g
+            if tangent:
+                H = -(w * lm)[:, None, None] * pc.hessian_at(x)
+                Hb = sp.block_diag(list(H), format="csr")
+                N = sp.csr_matrix(((w[:, None] * normal).ravel(),
+                                   (np.arange(m * d), np.repeat(np.arange(m), d))),
+                                  shape=(m * d, m))
+                blocks.append(((P_loc.T @ Hb @ P_loc).tocoo(), (0, 0)))
+                blocks.append(((-(P_loc.T @ N)).tocoo(), (0, k)))
+                blocks.append(((-(P_loc.T @ N)).T.tocoo(), (k, 0)))
+            k += m
         if not tangent:
             return R, None
+        for B, (r0, c0) in blocks:
+            rows.append(B.row + r0)
+            cols.append(B.col + c0)
+            vals.append(B.data)
+        size = n + self.n_lam
         K = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(n, n))
+                          shape=(size, size))
         return R, K
 
     def norm(self, R: np.ndarray) -> float:
-        val = float(np.linalg.norm(R * self.scale))
+        n = len(self.dofs)
+        val = float(np.hypot(np.linalg.norm(R[:n] * self.scale),
+                             np.linalg.norm(R[n:]) / self.volume))
         return val if np.isfinite(val) else np.inf
 
     def solve(self, X: np.ndarray, target: float, max_iterations: int) -> int:
-        """Newton with backtracking on the local DOFs of ``X`` (in place) until the local
-        scaled residual is at most ``target``; returns the iterations."""
-        R, K = self.assemble(X, tangent=True)
+        """Newton with backtracking on the local DOFs of ``X`` (in place) and the patch's
+        multipliers until the local scaled residual is at most ``target``; returns the
+        iterations."""
+        lam = self.multipliers()
+        R, K = self.assemble(X, lam, tangent=True)
         norm = self.norm(R)
+        n = len(self.dofs)
         for it in range(max_iterations):
             if norm <= target:
                 return it
             try:
-                dx = spla.spsolve(K, R)
+                dy = spla.splu(K).solve(R)
             except RuntimeError:  # singular local tangent: leave the state as it is
                 return it
-            if not np.all(np.isfinite(dx)):
+            if not np.all(np.isfinite(dy)):
                 return it
-            x0 = X[self.dofs].copy()
+            x0, lam0 = X[self.dofs].copy(), lam.copy()
             step = 1.0
             while step >= 1 / 64:
-                X[self.dofs] = x0 - step * dx
-                R_trial, _ = self.assemble(X, tangent=False)
-                trial = self.norm(R_trial)
+                X[self.dofs] = x0 - step * dy[:n]
+                lam = lam0 - step * dy[n:]
+                trial = self.norm(self.assemble(X, lam, tangent=False)[0])
                 if trial < (1 - 1e-4 * step) * norm:
                     break
                 step *= 0.5
             else:
                 X[self.dofs] = x0
+                self.set_multipliers(lam0)
                 return it
-            R, K = self.assemble(X, tangent=True)
+            self.set_multipliers(lam)
+            R, K = self.assemble(X, lam, tangent=True)
             norm = self.norm(R)
         return max_iterations

@@ -203,11 +203,14 @@ class PointContact:
         """``grad^2 g`` (m, dim, dim) at the deformed points ``on``: central differences
         of the obstacle's normal with a step of ``1e-3 h`` (the sampled skull is C2 away
         from its cut edge), symmetrised."""
-        if len(on) == 0:
+        return self.hessian_at(self.x[on])
+
+    def hessian_at(self, x: np.ndarray) -> np.ndarray:
+        """``grad^2 g`` (m, dim, dim) at the points ``x`` (m, dim), as :meth:`hessian`."""
+        if len(x) == 0:
             return np.zeros((0, self.dim, self.dim))
-        x = self.x[on]
         delta = 1e-3 * self.form.h
-        H = np.empty((len(on), self.dim, self.dim))
+        H = np.empty((len(x), self.dim, self.dim))
         for k in range(self.dim):
             e = np.zeros(self.dim)
             e[k] = delta
