@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from brainbulge.results.fields import (
+    det3,
     largest_eigenvalue,
     max_principal_strain,
     output_fields,
     radial_directions,
+    right_cauchy_green,
     sample,
     stretch_along,
     tangential_stretch,
@@ -46,6 +48,14 @@ def test_largest_eigenvalue_matches_lapack(spectrum: str) -> None:
     A = 0.5 * (A + np.swapaxes(A, 1, 2))
     expected = np.linalg.eigvalsh(A)[:, -1]
     assert np.abs(largest_eigenvalue(A) - expected).max() <= 1e-7 * max(1.0, np.abs(lam).max())
+
+
+def test_determinant_and_cauchy_green_match_numpy() -> None:
+    F = np.eye(3) + 0.4 * np.random.default_rng(3).standard_normal((1000, 3, 3))
+    F[0] = np.diag([2.0, 0.5, 1e-9])  # nearly singular
+    assert np.allclose(det3(F), np.linalg.det(F), rtol=1e-12, atol=1e-14)
+    assert np.allclose(right_cauchy_green(F), np.swapaxes(F, 1, 2) @ F, rtol=1e-14, atol=1e-14)
+    assert not np.allclose(right_cauchy_green(F), F @ np.swapaxes(F, 1, 2))  # not F F^T
 
 
 def test_tangential_stretch_3d_oblique_direction() -> None:
