@@ -127,6 +127,8 @@ def test_sequenced_solve_reaches_the_fine_solution_in_fewer_iterations(ramp) -> 
     assert sol.converged and record.coarse_converged and record.fine_converged
     assert [s.load for s in sol.steps] == [1.0]
     assert sol.newton_iterations < sol_ref.newton_iterations
+    # the carried-over state's residual: the fine Newton's first, above the tolerance
+    assert record.initial_residual == solver.history[-1][0] > OPTIONS.tolerance
     u_ref = _vertex_u(fine_ref)
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
     lam_ref = fine_ref.point_contacts[0].lam
