@@ -246,3 +246,25 @@ def test_vertex_fields_give_the_vertex_values():
                                atol=1e-13)
     regions = [el.index for el in form.mesh.Elements(ngs.VOL)]
     np.testing.assert_array_equal(vf.cell_data["region"], regions)
+
+
+def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
+    """The coarse state is only a start: its Newton stops at COARSE_TOLERANCE, the fine
+    mesh's at the requested tolerance."""
+    from brainbulge.solver import sequencing
+
+    histories = []
+
+    class Recording(NewtonSolver):
+        def __init__(self, form, options):
+            super().__init__(form, options)
+            histories.append((options.tolerance, self.history))
+
+    monkeypatch.setattr(sequencing, "NewtonSolver", Recording)
+    coarse, fine = _forms()
+    sol, _, _ = solve_sequenced(coarse, fine, OPTIONS)
+    assert sol.converged
+    (tol_c, hist_c), (tol_f, hist_f) = histories
+    assert tol_c == sequencing.COARSE_TOLERANCE > tol_f == OPTIONS.tolerance
+    assert sequencing.COARSE_TOLERANCE * 1e-3 < hist_c[-1][-1] <= sequencing.COARSE_TOLERANCE
+    assert hist_f[-1][-1] <= OPTIONS.tolerance
