@@ -125,7 +125,9 @@ class HotspotRelaxation:
         total = per_v.sum()
         if not total > 0:
             return None
-        top = np.argsort(per_v)[::-1][: self.max_vertices]
+        m = min(self.max_vertices, len(per_v))
+        top = np.argpartition(per_v, len(per_v) - m)[-m:]  # the m largest, then in order
+        top = top[np.argsort(per_v[top])[::-1]]
         k = int(np.searchsorted(np.cumsum(per_v[top]) / total, self.share)) + 1
         if k > len(top):
             return None
@@ -224,10 +226,9 @@ class _LocalProblem:
         pos = {int(d): i for i, d in enumerate(self.dofs)}
         self.items = [(fe, tr, dofs, bfis, np.array([pos.get(int(d), -1) for d in dofs]))
                       for fe, tr, dofs, bfis in self.items]
-        is_u = np.zeros(fes.ndof, dtype=bool)
-        r = fes.Range(0)
-        is_u[r.start : r.stop] = True
-        self.scale = np.where(is_u[self.dofs], 1 / solver.force_scale, 1 / solver.volume)
+        u = fes.Range(0)
+        is_u = (self.dofs >= u.start) & (self.dofs < u.stop)
+        self.scale = np.where(is_u, 1 / solver.force_scale, 1 / solver.volume)
         self.volume = solver.volume
         d = form.dim
         self.contacts = []  # pc, its points, P at them (all DOFs, local DOFs)
