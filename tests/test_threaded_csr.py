@@ -51,3 +51,24 @@ def test_small_and_other_matrices_are_left_alone() -> None:
     assert threaded(C) is C
     T = threaded(A)
     assert threaded(T) is T
+
+
+def test_a_forked_child_uses_a_pool_of_its_own(monkeypatch) -> None:
+    """After a fork the parent's pool threads do not exist in the child: its products must
+    not wait for them (they would hang)."""
+    import multiprocessing as mp
+
+    monkeypatch.setattr(threaded_csr, "MIN_NNZ", 1000)
+    monkeypatch.setattr(threaded_csr, "threads", lambda: 2)
+    A = _banded(20_000, 20_000, per_row=12)
+    x = np.ones(20_000)
+    expected = A @ x
+    assert np.array_equal(threaded(A) @ x, expected)  # the parent's pool now exists
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        result = pool.apply_async(_product_in_child, (A, x)).get(timeout=60)
+    assert np.array_equal(result, expected)
+
+
+def _product_in_child(A: sp.csr_matrix, x: np.ndarray) -> np.ndarray:
+    return threaded(A) @ x

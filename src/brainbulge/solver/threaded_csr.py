@@ -26,7 +26,7 @@ from scipy.sparse import _sparsetools
 #: is then a noticeable part of it)
 MIN_NNZ = 200_000
 
-_pool: ThreadPoolExecutor | None = None
+_pool: tuple[int, ThreadPoolExecutor] | None = None  # (the process it belongs to, pool)
 
 
 def threads() -> int:
@@ -38,10 +38,13 @@ def threads() -> int:
 
 
 def _executor() -> ThreadPoolExecutor:
+    """The pool of this process: a forked child (a study's worker) gets one of its own, as
+    the parent's threads do not exist in it and work handed to them would never run."""
     global _pool
-    if _pool is None:
-        _pool = ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="csr-matvec")
-    return _pool
+    if _pool is None or _pool[0] != os.getpid():
+        _pool = (os.getpid(),
+                 ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="csr-matvec"))
+    return _pool[1]
 
 
 def row_blocks(indptr: np.ndarray, parts: int) -> np.ndarray:
