@@ -89,6 +89,10 @@ class SolverOptions:
         hotspot_relaxation: after an accepted Newton step whose residual sits at a few
             vertices (MINI), solve their equations locally first (nonlinear elimination,
             :mod:`brainbulge.solver.hotspot`), kept only when the residual falls.
+        closed_form_tangent: assemble the tangent of a 3D MINI Mooney-Rivlin form from the
+            closed-form Hessian in compiled loops (:mod:`brainbulge.solver.mini_tangent`;
+            the same matrix as NGSolve's AD to round-off, 4-5x faster); other forms, or
+            ``False``, use NGSolve's ``AssembleLinearization``.
     """
 
     steps: int = 5
@@ -109,6 +113,7 @@ class SolverOptions:
     stop_on_failure: Callable[[float], bool] | None = None
     carried_curvature_tolerance: float = 1e-3
     hotspot_relaxation: bool = True
+    closed_form_tangent: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
@@ -176,6 +181,12 @@ class NewtonSolver:
             self.linear: LinearSolver = BlockKrylovSolver.from_form(form)
         else:
             self.linear = make_linear_solver(self.opt.linear_solver)
+        self.closed = None  # the closed-form tangent, where it applies
+        if self.opt.closed_form_tangent:
+            from brainbulge.solver import mini_tangent  # (Numba: imported only when used)
+
+            if mini_tangent.applies(form):
+                self.closed = mini_tangent.MiniTangent(form)
         fes = form.fes
         self.free = np.flatnonzero(np.array(list(fes.FreeDofs(form.condense)), dtype=bool))
         is_u = np.zeros(fes.ndof, dtype=bool)
@@ -275,12 +286,16 @@ class NewtonSolver:
         """The assembled (condensed) tangent restricted to the free DOFs, with the point
         contacts' curvature terms."""
         t0 = time.perf_counter()
-        with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
-            self.form.a.AssembleLinearization(x)
-        mat = self.form.a.mat  # (the width, as unused last DOFs leave trailing empty columns)
-        data, indices, indptr = mat.CSR()
-        # a view of NGSolve's matrix, only read: the free part is gathered out of it
-        K = sp.csr_matrix((np.asarray(data), indices, indptr), shape=(mat.height, mat.width))
+        if self.closed is not None:
+            K = self.closed.assemble(x.FV().NumPy())
+        else:
+            with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
+                self.form.a.AssembleLinearization(x)
+            mat = self.form.a.mat  # (the width: unused last DOFs leave trailing empty columns)
+            data, indices, indptr = mat.CSR()
+            # a view of NGSolve's matrix, only read: the free part is gathered out of it
+            K = sp.csr_matrix((np.asarray(data), indices, indptr),
+                              shape=(mat.height, mat.width))
         K = self._free_part(K)
         for pc in self.form.point_contacts:
             pc.update(x.FV().NumPy())
@@ -323,7 +338,9 @@ class NewtonSolver:
             dlams.append(pc.lam.copy())  # inactive: to zero
             moving = np.flatnonzero(pc_free(pc, self))
             rows_B.append((pc, moving, act[moving]))
-        if self.form.condense:
+        if self.closed is not None:
+            rhs.FV().NumPy()[:] += self.closed.extend_trans(rhs.FV().NumPy())
+        elif self.form.condense:
             rhs.data += a.harmonic_extension_trans * rhs
         b = rhs.FV().NumPy()[self.free]
         elimination = None
@@ -380,7 +397,10 @@ class NewtonSolver:
         for pts, dlam in zip(solved, dlams, strict=True):
             dlam[pts] = sol[k : k + len(pts)]
             k += len(pts)
-        if self.form.condense:
+        if self.closed is not None:
+            d = dx.FV().NumPy()
+            d += self.closed.extend(d) + self.closed.inner_solve(rhs.FV().NumPy())
+        elif self.form.condense:
             dx.data += a.harmonic_extension * dx
             dx.data += a.inner_solve * rhs
         return dx, dlams

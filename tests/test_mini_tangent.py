@@ -1,0 +1,121 @@
+"""The closed-form MINI tangent (:mod:`brainbulge.solver.mini_tangent`).
+
+Its Hessian against finite differences of the closed-form stress, its assembled and
+condensed matrix and bubble operators against NGSolve's AD of the energy, and Newton's
+path with it against the path with NGSolve's tangent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from brainbulge.geometry.inclusion import inclusion_mesh
+from brainbulge.materials import MooneyRivlin
+from brainbulge.model import Problem
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.mini_tangent import MiniTangent, _hessian, applies
+
+SOFT = MooneyRivlin(0.03, 33.3)
+STIFF = MooneyRivlin(0.28, 333.0)
+
+
+def _problem(curved: bool = False) -> Problem:
+    """A soft swelling sphere (Js 1.3) in a stiff ball (octant, symmetry planes), with
+    straight tets unless ``curved``."""
+    mesh = inclusion_mesh(3, A=0.3, h=0.3, h_inclusion=0.15)
+    if not curved:
+        mesh.Curve(1)
+    return Problem(mesh, {"inclusion": SOFT, "matrix": STIFF}, {"inclusion": 1.3},
+                   clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"})
+
+
+def _stress(F: np.ndarray, p: float, m: MooneyRivlin) -> np.ndarray:
+    """First Piola-Kirchhoff stress ``P = dW/dF = tau F^-T`` [kPa]."""
+    return m.kirchhoff_stress(F, p) @ np.linalg.inv(F).T
+
+
+@pytest.mark.parametrize("m", [STIFF, MooneyRivlin(1.0, 0.0)])
+def test_hessian_is_the_derivative_of_the_stress(m: MooneyRivlin) -> None:
+    rng = np.random.default_rng(3)
+    for scale in (0.05, 0.4):
+        F = np.eye(3) + scale * rng.standard_normal((3, 3))
+        assert np.linalg.det(F) > 0
+        p = float(rng.standard_normal()) * 10
+        A, H = np.empty((9, 9)), np.empty((3, 3))
+        _hessian(F, p, m.c1, m.c2, A, H)
+        assert np.allclose(H, np.linalg.det(F) * np.linalg.inv(F).T, rtol=1e-13, atol=1e-14)
+        h = 1e-6
+        fd = np.empty((9, 9))
+        for kl in range(9):
+            dF = np.zeros(9)
+            dF[kl] = h
+            dF = dF.reshape(3, 3)
+            fd[:, kl] = ((_stress(F + dF, p, m) - _stress(F - dF, p, m)) / (2 * h)).ravel()
+        assert np.abs(A - fd).max() <= 1e-6 * np.abs(A).max()
+        assert np.allclose(A, A.T, rtol=0, atol=1e-12 * np.abs(A).max())
+
+
+@pytest.fixture(scope="module")
+def form_and_state():
+    form = MixedForm(_problem(), element="mini")
+    form.set_load(1.0)
+    rng = np.random.default_rng(7)
+    x = form.gfu.vec.FV().NumPy()
+    x[:] = 0.02 * rng.standard_normal(len(x))
+    return form, MiniTangent(form)
+
+
+def test_tangent_and_bubble_operators_equal_ngsolves(form_and_state) -> None:
+    form, mt = form_and_state
+    assert applies(form)
+    x = form.gfu.vec
+    form.a.AssembleLinearization(x)
+    data, indices, indptr = form.a.mat.CSR()
+    n = form.fes.ndof
+    K_ad = sp.csr_matrix((np.array(data), np.array(indices), np.array(indptr)), shape=(n, n))
+    K = mt.assemble(x.FV().NumPy())
+    scale = np.abs(K_ad).max()
+    assert np.abs(K - K_ad).max() <= 1e-13 * scale
+    assert np.abs(K).max() == pytest.approx(scale)  # not both empty
+    r = x.CreateVector()
+    r.FV().NumPy()[:] = np.random.default_rng(1).standard_normal(n)
+    for op, mine in ((form.a.harmonic_extension_trans, mt.extend_trans),
+                     (form.a.harmonic_extension, mt.extend),
+                     (form.a.inner_solve, mt.inner_solve)):
+        y = r.CreateVector()
+        y.data = op * r
+        ref = y.FV().NumPy()
+        assert np.linalg.norm(ref) > 0
+        assert np.linalg.norm(mine(r.FV().NumPy()) - ref) <= 1e-10 * np.linalg.norm(ref)
+
+
+def test_a_degenerate_element_gives_a_non_finite_tangent(form_and_state) -> None:
+    form, _ = form_and_state
+    mt = MiniTangent(form)
+    mt.coords = mt.coords.copy()
+    v = mt.verts[0]
+    mt.coords[v[0]] = mt.coords[v[1]]  # element 0 flattened
+    assert not np.isfinite(mt.assemble(form.gfu.vec.FV().NumPy()).data).any()
+
+
+def test_newton_takes_the_same_path_with_either_tangent() -> None:
+    results = []
+    for closed in (True, False):
+        form = MixedForm(_problem(), element="mini")
+        ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10,
+                                              closed_form_tangent=closed))
+        assert (ns.closed is not None) == closed
+        res = ns.solve()
+        assert res.converged
+        results.append((res.newton_iterations, form.gfu.vec.FV().NumPy().copy()))
+    (it1, x1), (it2, x2) = results
+    assert it1 == it2
+    assert np.abs(x1 - x2).max() <= 1e-8 * np.abs(x2).max()
+
+
+def test_other_forms_keep_ngsolves_tangent() -> None:
+    assert not applies(MixedForm(_problem(curved=True), element="mini"))
+    assert not applies(MixedForm(_problem(), element="taylor-hood"))
+    assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).closed is None
