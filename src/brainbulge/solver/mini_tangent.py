@@ -54,6 +54,8 @@ from brainbulge.materials.mooney_rivlin import MooneyRivlin
 from brainbulge.solver.threaded_csr import threads
 
 log = logging.getLogger(__name__)
+# Numba's compiler logs every pass at DEBUG: tens of thousands of lines in a run's log
+logging.getLogger("numba").setLevel(logging.WARNING)
 
 #: barycentric coordinates of the 4-point rule of order 2 on the tetrahedron (weights 1/4)
 _A, _B = 0.5854101966249685, 0.1381966011250105
@@ -117,20 +119,6 @@ def _hessian(F, p, c1, c2, A, H):  # noqa: ANN001, ANN202 - Numba kernel
                     if j == m:
                         e -= 2.0 * psi2 * b[i, k]
                     A[3 * i + j, 3 * k + m] = e
-
-
-@numba.njit(cache=True)
-def _find(indptr, indices, row, col):  # noqa: ANN001, ANN202 - Numba kernel
-    """Position of ``(row, col)`` in a CSR pattern with sorted column indices."""
-    lo = indptr[row]
-    hi = indptr[row + 1]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if indices[mid] < col:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
 
 
 @numba.njit(cache=True)
@@ -220,8 +208,9 @@ def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa
 @numba.njit(cache=True, parallel=True)
 def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  # noqa: ANN001, ANN202
               indptr, indices, data, Kbb_inv, E):
-    """Condensed element matrices added into ``data`` (CSR of NGSolve's pattern), chunk by
-    chunk: the chunks of one colour share no vertex, so they run in parallel. Returns the
+    """Condensed element matrices added into ``data`` (CSR pattern with sorted columns that
+    holds every element's DOF pairs), chunk by chunk: the chunks of one colour share no
+    vertex, so they run in parallel. Returns the
     number of degenerate elements (zero volume or a singular bubble block)."""
     bad = 0
     for c in range(len(chunks) - 1):  # colours: chunks[c] .. chunks[c + 1] index ``order``
@@ -263,12 +252,16 @@ def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  #
                     for r in range(16):  # E = -K_bb^-1 K_be
                         E[e, i, r] = -(inv[i, 0] * K[16, r] + inv[i, 1] * K[17, r]
                                        + inv[i, 2] * K[18, r])
+                srt = np.argsort(gd)  # the element's columns in ascending order
                 for r in range(16):
-                    row = gd[r]
-                    for s2 in range(16):
-                        v = (K[r, s2] + K[r, 16] * E[e, 0, s2] + K[r, 17] * E[e, 1, s2]
-                             + K[r, 18] * E[e, 2, s2])
-                        data[_find(indptr, indices, row, gd[s2])] += v
+                    pos = indptr[gd[r]]  # walk the row once, merging with the columns
+                    for m in range(16):
+                        s2 = srt[m]
+                        col = gd[s2]
+                        while indices[pos] < col:
+                            pos += 1
+                        data[pos] += (K[r, s2] + K[r, 16] * E[e, 0, s2]
+                                      + K[r, 17] * E[e, 1, s2] + K[r, 18] * E[e, 2, s2])
     return bad
 
 
@@ -348,7 +341,7 @@ class MiniTangent:
         self.ext_dofs = np.concatenate(
             [(np.arange(3)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 12),
              self.zoff[:, None] + self.verts], axis=1)
-        self._pattern = _pattern(form)
+        self._pattern = _pattern(self.ext_dofs, self.ndof)
         numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
         log.info("closed-form MINI tangent: %d elements in %d colours, pattern %d non-zeros "
                  "(%.1f s)", ne, n_col, self._pattern.nnz, time.perf_counter() - t0)
@@ -423,18 +416,48 @@ def _bubble_constant(V: ngs.FESpace, mesh: ngs.Mesh) -> float:
     return float(cb)
 
 
-def _pattern(form) -> sp.csr_matrix:  # noqa: ANN001 - MixedForm
-    """NGSolve's sparsity pattern of the condensed tangent (sorted column indices), from a
-    cheap form on the same space: every DOF pair of an element is in NGSolve's graph."""
-    fes = form.fes
-    (u, *ps), (v, *qs) = fes.TnT()
-    a = ngs.BilinearForm(fes, symmetric=True, condense=True)
-    pq = sum((p * q for p, q in zip(ps[1:], qs[1:], strict=True)), ps[0] * qs[0])
-    a += (ngs.InnerProduct(u, v) + pq) * ngs.dx
-    with ngs.TaskManager():
-        a.Assemble()
-    data, indices, indptr = a.mat.CSR()
-    K = sp.csr_matrix((np.ones(len(indices)), np.array(indices), np.array(indptr)),
-                      shape=(fes.ndof, fes.ndof))
-    K.sort_indices()
-    return K
+@numba.njit(cache=True, parallel=True)
+def _pattern_rows(ext, ndof, ptr, adj, maxlen, nthreads, count_only, indptr, indices):  # noqa: ANN001, ANN202
+    """Row lengths (``count_only``) or sorted column indices of the pattern of all DOF pairs
+    of every element; ``ptr``/``adj``: the elements of each DOF. A marker per thread and
+    DOF marks the columns found for the current row."""
+    lengths = np.zeros(ndof, dtype=np.int64)
+    marker = np.full((nthreads, ndof), -1, dtype=np.int64)
+    for t in numba.prange(nthreads):
+        buf = np.empty(maxlen, dtype=np.int64)
+        for d in range(t * ndof // nthreads, (t + 1) * ndof // nthreads):
+            n = 0
+            for k in range(ptr[d], ptr[d + 1]):
+                e = adj[k]
+                for m in range(ext.shape[1]):
+                    c = ext[e, m]
+                    if marker[t, c] != d:
+                        marker[t, c] = d
+                        buf[n] = c
+                        n += 1
+            lengths[d] = n
+            if not count_only:
+                cols = np.sort(buf[:n])
+                for k in range(n):
+                    indices[indptr[d] + k] = cols[k]
+    return lengths
+
+
+def _pattern(ext: np.ndarray, ndof: int) -> sp.csr_matrix:
+    """The sparsity pattern of the condensed tangent: every pair of an element's external
+    DOFs ``ext`` (ne x 16), as NGSolve's matrix graph has it (sorted columns, int32)."""
+    ne, m = ext.shape
+    flat = ext.ravel()
+    ptr = np.zeros(ndof + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat, minlength=ndof), out=ptr[1:])
+    adj = (np.argsort(flat, kind="stable") // m).astype(np.int64)  # the elements of each DOF
+    dummy = np.zeros(1, dtype=np.int64)
+    maxlen = int(np.diff(ptr).max()) * m  # a row's candidate columns, duplicates included
+    nt = numba.get_num_threads()
+    lengths = _pattern_rows(ext, ndof, ptr, adj, maxlen, nt, True, dummy, dummy)
+    indptr = np.zeros(ndof + 1, dtype=np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    indices = np.empty(indptr[-1], dtype=np.int64)
+    _pattern_rows(ext, ndof, ptr, adj, maxlen, nt, False, indptr, indices)
+    return sp.csr_matrix((np.zeros(len(indices)), indices.astype(np.int32),
+                          indptr.astype(np.int32)), shape=(ndof, ndof))
