@@ -119,3 +119,10 @@ def test_other_forms_keep_ngsolves_tangent() -> None:
     assert not applies(MixedForm(_problem(curved=True), element="mini"))
     assert not applies(MixedForm(_problem(), element="taylor-hood"))
     assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).closed is None
+
+
+def test_the_environment_can_switch_it_off(monkeypatch) -> None:
+    monkeypatch.setenv("BRAINBULGE_CLOSED_TANGENT", "0")
+    assert not SolverOptions().closed_form_tangent
+    monkeypatch.delenv("BRAINBULGE_CLOSED_TANGENT")
+    assert SolverOptions().closed_form_tangent

@@ -92,7 +92,8 @@ class SolverOptions:
         closed_form_tangent: assemble the tangent of a 3D MINI Mooney-Rivlin form from the
             closed-form Hessian in compiled loops (:mod:`brainbulge.solver.mini_tangent`;
             the same matrix as NGSolve's AD to round-off, 4-5x faster); other forms, or
-            ``False``, use NGSolve's ``AssembleLinearization``.
+            ``False``, use NGSolve's ``AssembleLinearization``. The default is ``True``
+            unless the environment sets ``BRAINBULGE_CLOSED_TANGENT=0`` (for comparisons).
     """
 
     steps: int = 5
@@ -113,7 +114,8 @@ class SolverOptions:
     stop_on_failure: Callable[[float], bool] | None = None
     carried_curvature_tolerance: float = 1e-3
     hotspot_relaxation: bool = True
-    closed_form_tangent: bool = True
+    closed_form_tangent: bool = field(
+        default_factory=lambda: os.environ.get("BRAINBULGE_CLOSED_TANGENT", "1") != "0")
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
