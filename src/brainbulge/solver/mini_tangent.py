@@ -14,7 +14,7 @@ Energy per unit reference volume (MODEL.md section 2, :mod:`brainbulge.solver.mi
 
 With ``psi(I1, I2, J)`` and the derivatives ``dI1 = 2 F``, ``dI2 = 2 (I1 F - F C)``,
 ``dJ = H = cof F`` and ``d2I1[A, B] = 2 A:B``, ``d2I2[A, B] = 2 (2 (F:A)(F:B) + I1 A:B
-- A:(B C) - A:(F B^T F) - A:(b B))``, ``d2J[A, B] = ((H:A)(H:B) - A:(H B^T H)/J... )``,
+- A:(B C) - A:(F B^T F) - A:(b B))``, ``d2J[A, B] = ((H:A)(H:B) - A:(H B^T H))/J``,
 in index form (``A_ijkl = d2W / dF_ij dF_kl``, ``b = F F^T``, ``C = F^T F``)::
 
     A_ijkl = 4 psi2 F_ij F_kl + (psiJJ + psiJ/J) H_ij H_kl
@@ -121,6 +121,26 @@ def _hessian(F, p, c1, c2, A, H):  # noqa: ANN001, ANN202 - Numba kernel
                     A[3 * i + j, 3 * k + m] = e
 
 
+@numba.njit(cache=True, inline="always")
+def _inverse3(M, out):  # noqa: ANN001, ANN202 - Numba kernel
+    """``out = M^-1`` of a 3x3 matrix by cofactors; returns ``det M`` (``out`` untouched
+    when it is zero)."""
+    det = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+           - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+           + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+    if det != 0.0:
+        out[0, 0] = (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]) / det
+        out[0, 1] = (M[0, 2] * M[2, 1] - M[0, 1] * M[2, 2]) / det
+        out[0, 2] = (M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1]) / det
+        out[1, 0] = (M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]) / det
+        out[1, 1] = (M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]) / det
+        out[1, 2] = (M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2]) / det
+        out[2, 0] = (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]) / det
+        out[2, 1] = (M[0, 1] * M[2, 0] - M[0, 0] * M[2, 1]) / det
+        out[2, 2] = (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]) / det
+    return det
+
+
 @numba.njit(cache=True)
 def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa: ANN001, ANN202
     """Element matrix ``K`` (19 x 19: 12 vertex displacements ``3 a + i``, 4 pressures,
@@ -130,22 +150,14 @@ def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa
     for i in range(3):
         for d in range(3):
             T[d, i] = coords[verts[e, i + 1], d] - coords[verts[e, 0], d]
-    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1])
-           - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
-           + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]))
+    Tinv = np.empty((3, 3))
+    det = _inverse3(T, Tinv)
     if det == 0.0:
         return False
-    # rows of T^-1 are grad lambda_1..3; grad lambda_0 = -their sum
-    g = np.empty((5, 3))
-    g[1, 0] = (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1]) / det
-    g[1, 1] = (T[0, 2] * T[2, 1] - T[0, 1] * T[2, 2]) / det
-    g[1, 2] = (T[0, 1] * T[1, 2] - T[0, 2] * T[1, 1]) / det
-    g[2, 0] = (T[1, 2] * T[2, 0] - T[1, 0] * T[2, 2]) / det
-    g[2, 1] = (T[0, 0] * T[2, 2] - T[0, 2] * T[2, 0]) / det
-    g[2, 2] = (T[0, 2] * T[1, 0] - T[0, 0] * T[1, 2]) / det
-    g[3, 0] = (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]) / det
-    g[3, 1] = (T[0, 1] * T[2, 0] - T[0, 0] * T[2, 1]) / det
-    g[3, 2] = (T[0, 0] * T[1, 1] - T[0, 1] * T[1, 0]) / det
+    g = np.empty((5, 3))  # rows of T^-1 are grad lambda_1..3; grad lambda_0 = -their sum
+    for i in range(3):
+        for d in range(3):
+            g[i + 1, d] = Tinv[i, d]
     for d in range(3):
         g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
     w = abs(det) / 6.0 / 4.0
@@ -231,21 +243,9 @@ def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  #
                 for i in range(3):
                     for j in range(3):
                         Kbb[i, j] = K[16 + i, 16 + j]
-                d = (Kbb[0, 0] * (Kbb[1, 1] * Kbb[2, 2] - Kbb[1, 2] * Kbb[2, 1])
-                     - Kbb[0, 1] * (Kbb[1, 0] * Kbb[2, 2] - Kbb[1, 2] * Kbb[2, 0])
-                     + Kbb[0, 2] * (Kbb[1, 0] * Kbb[2, 1] - Kbb[1, 1] * Kbb[2, 0]))
-                if d == 0.0:
+                if _inverse3(Kbb, inv) == 0.0:
                     bad += 1
                     continue
-                inv[0, 0] = (Kbb[1, 1] * Kbb[2, 2] - Kbb[1, 2] * Kbb[2, 1]) / d
-                inv[0, 1] = (Kbb[0, 2] * Kbb[2, 1] - Kbb[0, 1] * Kbb[2, 2]) / d
-                inv[0, 2] = (Kbb[0, 1] * Kbb[1, 2] - Kbb[0, 2] * Kbb[1, 1]) / d
-                inv[1, 0] = (Kbb[1, 2] * Kbb[2, 0] - Kbb[1, 0] * Kbb[2, 2]) / d
-                inv[1, 1] = (Kbb[0, 0] * Kbb[2, 2] - Kbb[0, 2] * Kbb[2, 0]) / d
-                inv[1, 2] = (Kbb[0, 2] * Kbb[1, 0] - Kbb[0, 0] * Kbb[1, 2]) / d
-                inv[2, 0] = (Kbb[1, 0] * Kbb[2, 1] - Kbb[1, 1] * Kbb[2, 0]) / d
-                inv[2, 1] = (Kbb[0, 1] * Kbb[2, 0] - Kbb[0, 0] * Kbb[2, 1]) / d
-                inv[2, 2] = (Kbb[0, 0] * Kbb[1, 1] - Kbb[0, 1] * Kbb[1, 0]) / d
                 for i in range(3):
                     for j in range(3):
                         Kbb_inv[e, i, j] = inv[i, j]
