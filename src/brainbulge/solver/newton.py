@@ -184,8 +184,8 @@ class NewtonSolver:
         else:
             self.linear = make_linear_solver(self.opt.linear_solver)
         self.closed = None  # the closed-form tangent, where it applies
-        if self.opt.closed_form_tangent:
-            from brainbulge.solver import mini_tangent  # (Numba: imported only when used)
+        if self.opt.closed_form_tangent and form.element == "mini" and form.dim == 3:
+            from brainbulge.solver import mini_tangent  # (Numba, ~0.5 s: only where it may apply)
 
             if mini_tangent.applies(form):
                 self.closed = mini_tangent.MiniTangent(form)
