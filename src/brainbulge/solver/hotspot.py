@@ -5,9 +5,10 @@ Where Newton's residual sits at a handful of vertices whose local problem is nea
 singular, the global iteration converges only linearly there: at 1.40M tets the fine stage's
 residual fell 0.25-0.3x per iteration, 90-100 % of ``|R|^2`` at three CSF vertices of the
 flap rim's free surface (Newton at a double root falls 1/4 per step), and every such
-iteration costs a global tangent (~40 s) and a GMRES solve. Nonlinear elimination
-(Lanzkron, Rose & Wilkes 1996; Cai & Keyes 2002) solves the hotspot's own equations to
-convergence first, which costs element matrices of a few hundred tets.
+iteration costs a global tangent (~40 s then, ~10 s in closed form since) and a GMRES
+solve. Nonlinear elimination (Lanzkron, Rose & Wilkes 1996; Cai & Keyes 2002) solves the
+hotspot's own equations to convergence first, which costs element matrices of a few
+hundred tets.
 
 After an accepted Newton step, with ``r_v`` the scaled residual of the DOFs at vertex ``v``
 (displacements / ``mu L^(d-1)``, pressures / ``|Omega|``, as the Newton norm scales them):
