@@ -84,13 +84,15 @@ RESERVED_NAMES = frozenset(
     {"study.json", "run.json", "run.toml", "status.json", "summary.json", "error.json"}
 )
 
-#: Environment of worker processes: one BLAS/OpenMP/MKL (pypardiso) and NGSolve
-#: ``TaskManager`` thread each, so ``n_workers`` processes use ``n_workers`` cores.
+#: Environment of worker processes: one BLAS/OpenMP/MKL (pypardiso), NGSolve
+#: ``TaskManager`` and Numba (closed-form tangent) thread each, so ``n_workers`` processes
+#: use ``n_workers`` cores.
 WORKER_ENV = {
     "OMP_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
     "NGS_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
 }
 
 SUMMARY_FILE = "summary.json"
