@@ -126,3 +126,13 @@ def test_the_environment_can_switch_it_off(monkeypatch) -> None:
     assert not SolverOptions().closed_form_tangent
     monkeypatch.delenv("BRAINBULGE_CLOSED_TANGENT")
     assert SolverOptions().closed_form_tangent
+
+
+def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(monkeypatch, caplog) -> None:
+    def unexpected(self, fes) -> None:
+        raise ValueError("unexpected DOF numbering of element 0")
+
+    monkeypatch.setattr(MiniTangent, "_check_dofs", unexpected)
+    ns = NewtonSolver(MixedForm(_problem(), element="mini"))
+    assert ns.closed is None
+    assert "closed-form tangent not used" in caplog.text

@@ -42,6 +42,7 @@ and the bubble condensed statically: ``S = K_ee - K_eb K_bb^-1 K_be``, with
 from __future__ import annotations
 
 import logging
+import re
 import time
 
 import ngsolve as ngs
@@ -305,7 +306,6 @@ class MiniTangent:
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         t0 = time.perf_counter()
         mesh, fes = form.mesh, form.fes
-        self.form = form
         self.verts, region = element_vertices(mesh)
         self.coords = vertex_coordinates(mesh)
         nv, ne = mesh.nv, mesh.ne
@@ -319,7 +319,6 @@ class MiniTangent:
         self.c2 = np.array([mats[n].c2 for n in names])[region]
         # each element's pressure space: the zone (regex over region names) it belongs to
         offsets = np.cumsum([0] + [s.ndof for s in fes.components])
-        import re
         zone_of_region = np.full(len(names), -1)
         for z, pat in enumerate(form.pressure_zones):
             rx = re.compile(f"^(?:{pat})$")
@@ -400,7 +399,6 @@ def _bubble_constant(V: ngs.FESpace, mesh: ngs.Mesh) -> float:
     """``c_B`` of NGSolve's interior bubble ``B = c_B lambda_0 lambda_1 lambda_2 lambda_3``
     (order-4 H1 on a tet), from its value at the first element's centroid."""
     gf = ngs.GridFunction(V)
-    nH1 = V.ndof // 3
     gf.vec.FV().NumPy()[mesh.nv] = 1.0  # the first element's bubble, x component
     el = mesh[ngs.ElementId(ngs.VOL, 0)]
     centroid = np.mean([mesh[v].point for v in el.vertices], axis=0)
@@ -412,7 +410,6 @@ def _bubble_constant(V: ngs.FESpace, mesh: ngs.Mesh) -> float:
     cb = val * 4**4
     if not np.isclose(val2, cb * np.prod(bary), rtol=1e-10):
         raise ValueError("NGSolve's tet bubble is not c lambda_0 lambda_1 lambda_2 lambda_3")
-    del nH1
     return float(cb)
 
 

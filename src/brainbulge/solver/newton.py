@@ -188,7 +188,10 @@ class NewtonSolver:
             from brainbulge.solver import mini_tangent  # (Numba, ~0.5 s: only where it may apply)
 
             if mini_tangent.applies(form):
-                self.closed = mini_tangent.MiniTangent(form)
+                try:
+                    self.closed = mini_tangent.MiniTangent(form)
+                except ValueError as exc:  # a numbering or element it does not know
+                    log.warning("closed-form tangent not used (%s); NGSolve's instead", exc)
         fes = form.fes
         self.free = np.flatnonzero(np.array(list(fes.FreeDofs(form.condense)), dtype=bool))
         is_u = np.zeros(fes.ndof, dtype=bool)
