@@ -12,6 +12,9 @@ Variants (the same mesh, model and outputs):
   PARDISO on every Newton matrix;
 - ``direct``: MINI (P1 + condensed bubble / P1), the energy compiled to machine code, PARDISO;
 - ``krylov``: MINI, compiled, GMRES with AMG blocks at Eisenstat-Walker tolerances;
+- ``th-krylov``: Taylor-Hood, compiled, GMRES with a two-level cycle on the P2 block (the
+  P1 part's AMG inside Gauss-Seidel sweeps): a Taylor-Hood reference on meshes beyond
+  PARDISO's reach here;
 - ``sequenced``: ``krylov`` with mesh sequencing: the load ramped first on a mesh of about
   ``--coarse-tets`` tets (built or reused from the cache like the fine one), the fine mesh's
   Newton started at full load from that solution. Its solve time includes the coarse stage;
@@ -48,6 +51,7 @@ VARIANTS = {
     "baseline": {"element": "taylor-hood", "linear_solver": "pardiso", "compile": False},
     "direct": {"element": "mini", "linear_solver": "pardiso", "compile": True},
     "krylov": {"element": "mini", "linear_solver": "krylov", "compile": True},
+    "th-krylov": {"element": "taylor-hood", "linear_solver": "krylov", "compile": True},
     "sequenced": {"element": "mini", "linear_solver": "krylov", "compile": True},
 }
 

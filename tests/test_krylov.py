@@ -91,6 +91,62 @@ def test_rigid_modes_in_the_kernel_of_the_reference_stiffness(box3d) -> None:
         assert np.linalg.norm(A @ m) <= 1e-10 * abs(A).max() * np.linalg.norm(m)
 
 
+@pytest.fixture(scope="module")
+def swollen_taylor_hood():
+    """As ``swollen``, with Taylor-Hood (hierarchical P2 / P1): a tangent at load 0.7 and
+    the residual at load 1, over the free DOFs."""
+    form = MixedForm(_inclusion_problem(), element="taylor-hood")
+    ns = NewtonSolver(form, SolverOptions(tolerance=1e-10))
+    for load in (0.4, 0.7):
+        form.set_load(load)
+        assert ns.newton(form.gfu.vec)[0]
+    K = ns.tangent(form.gfu.vec)
+    form.set_load(1.0)
+    return form, ns, K, ns.residual(form.gfu.vec)[ns.free].copy()
+
+
+def test_taylor_hood_layout_and_rigid_modes(box3d) -> None:
+    """P2 edge DOFs have no vertex (-1), the component of their block of NGSolve's
+    ordering, and zero rigid-motion coefficients: the modes are still in the kernel."""
+    form = MixedForm(Problem(box3d, {"tissue": STIFF}, {"tissue": 1.1}), element="taylor-hood")
+    lay = displacement_layout(form)
+    V = form.fes.components[0]
+    per_comp = V.ndof // 3
+    assert np.count_nonzero(lay.linear) == 3 * form.mesh.nv
+    assert np.count_nonzero(~lay.linear) == 3 * form.mesh.nedge
+    np.testing.assert_array_equal(lay.component, np.arange(V.ndof) // per_comp)
+    modes = lay.rigid_body_modes()
+    assert np.all(modes[~lay.linear] == 0)
+    A = reference_stiffness(form)
+    for m in modes.T:
+        assert np.linalg.norm(A @ m) <= 1e-10 * abs(A).max() * np.linalg.norm(m)
+
+
+def test_taylor_hood_two_level_cycle_matches_direct_solve(swollen_taylor_hood) -> None:
+    form, _, K, r = swollen_taylor_hood
+    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
+    x = solver.solve(K, r)
+    x_direct = _direct(K, r)
+    assert np.linalg.norm(x - x_direct) <= 1e-6 * np.linalg.norm(x_direct)
+    assert len(solver._amg_u.ml.levels) >= 2
+    assert solver.stats.iterations[-1] <= 100  # 50 here
+
+
+def test_taylor_hood_two_level_cycle_is_symmetric(swollen_taylor_hood) -> None:
+    """Forward sweep, P1 V-cycle (itself symmetric), backward sweep: ``z(a) . b = a .
+    z(b)`` (block-diagonal MINRES needs a symmetric preconditioner)."""
+    form, ns, K, _ = swollen_taylor_hood
+    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
+    A = K[solver.iu][:, solver.iu].tocsr()
+    assert abs(A - A.T).max() <= 1e-12 * abs(A).max()
+    cycle = solver._amg_u
+    cycle.setup(A)
+    a, b = np.random.default_rng(1).standard_normal((2, A.shape[0]))
+    za, zb = cycle(a), cycle(b)
+    assert abs(za @ b - a @ zb) <= 1e-10 * np.linalg.norm(za) * np.linalg.norm(b)
+    assert np.linalg.norm(za - cycle(a)) == 0  # no state kept between applications
+
+
 def test_pressure_mass_is_weighted_by_one_over_mu(swollen) -> None:
     form = swollen[0]
     M = pressure_schur_mass(form)
@@ -255,13 +311,14 @@ def test_forcing_terms_follow_the_residual_ratio() -> None:
     assert forcing_term(ETA_MAX, 0.0, 1e-30, 0.0) == ETA_MIN
 
 
-def test_inexact_newton_reaches_the_direct_solution() -> None:
+@pytest.mark.parametrize("element", ["mini", "taylor-hood"])
+def test_inexact_newton_reaches_the_direct_solution(element: str) -> None:
     """Newton with Krylov at Eisenstat-Walker tolerances converges to the same state as
     Newton with the direct solver, in about as many iterations."""
     problem = _inclusion_problem()
     sols = {}
     for linear in ("pardiso", "krylov"):
-        form = MixedForm(problem, element="mini")
+        form = MixedForm(problem, element=element)
         sol = NewtonSolver(form, SolverOptions(steps=2, linear_solver=linear)).solve()
         assert sol.converged
         sols[linear] = (form.gfu.vec.FV().NumPy().copy(), sol.newton_iterations)

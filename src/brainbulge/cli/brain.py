@@ -51,7 +51,7 @@ def add_parser(sub: Any) -> None:
                    help="Newton's tolerance on the scaled residual at full load (default 1e-9)")
     p.add_argument("--element", choices=("mini", "taylor-hood"), default="mini")
     p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="pardiso",
-                   help="direct, or GMRES with AMG blocks for large meshes (MINI)")
+                   help="direct, or GMRES with AMG blocks for large meshes")
     p.add_argument("--coarse-tets", type=int, default=None,
                    help="mesh sequencing: solve first on a mesh of about this many tets, then "
                    "finish on the fine mesh from its solution (MINI; e.g. tets / 14 for "

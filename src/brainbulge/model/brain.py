@@ -54,8 +54,8 @@ class CraniectomyCase:
             ``lambda_n`` and ``lambda_t`` use them instead of the radial direction.
         material: material preset (``paper`` or ``paper-pa``).
         element: ``mini`` (P1 + bubble / P1) or ``taylor-hood`` (P2 / P1).
-        linear_solver: ``pardiso`` (direct) or ``krylov`` (GMRES + AMG blocks, MINI only,
-            for large meshes).
+        linear_solver: ``pardiso`` (direct) or ``krylov`` (GMRES + AMG blocks, for large
+            meshes; with Taylor-Hood a two-level cycle on the P2 block).
         steps: initial load steps.
         tolerance: Newton's stopping tolerance at full load, on the scaled residual (force /
             (mu L^2), volume / |Omega|; :class:`~brainbulge.solver.SolverOptions`) [-].
@@ -111,8 +111,6 @@ class CraniectomyCase:
             raise InputError(f"swelling Js = {self.swelling!r} must lie in [0.5, 2] (paper: 1.1)")
         if self.linear_solver not in ("pardiso", "krylov"):
             raise InputError(f"linear solver {self.linear_solver!r}: choose pardiso or krylov")
-        if self.linear_solver == "krylov" and self.element != "mini":
-            raise InputError("the krylov linear solver needs --element mini")
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
         if not (isinstance(self.tolerance, (int, float)) and 0 < self.tolerance <= 1e-3):

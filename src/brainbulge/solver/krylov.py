@@ -74,7 +74,9 @@ class DisplacementLayout:
     Attributes:
         coords: (n_vertices, dim) vertex coordinates.
         vertex: (n_free_u,) vertex of each free displacement DOF, in the order of the free
-            DOFs.
+            DOFs; -1 at the DOFs of higher-order hierarchical basis functions (Taylor-Hood's
+            P2 edge functions), which vanish at every vertex and carry no part of a rigid
+            motion.
         component: (n_free_u,) component (0 = x, 1 = y, 2 = z) of each.
     """
 
@@ -86,11 +88,18 @@ class DisplacementLayout:
     def dim(self) -> int:
         return int(self.coords.shape[1])
 
+    @property
+    def linear(self) -> np.ndarray:
+        """(n_free_u,) True at the DOFs of vertex (P1 hat) basis functions."""
+        return self.vertex >= 0
+
     def rigid_body_modes(self) -> np.ndarray:
-        """(n_free_u, 3 or 6) translations and linearised rotations about the centroid."""
+        """(n_free_u, 3 or 6) translations and linearised rotations about the centroid
+        (zero at hierarchical higher-order DOFs: a linear field is their P1 part alone)."""
         dim = self.dim
-        X = self.coords[self.vertex] - self.coords.mean(axis=0)
-        c = self.component
+        X = np.where(self.linear[:, None], self.coords[self.vertex] - self.coords.mean(axis=0),
+                     0.0)
+        c = np.where(self.linear, self.component, -1)
         n = len(c)
         modes = [(c == i).astype(float) for i in range(dim)]
         # rotation about axis k: (e_k x X)_c, i.e. for (i, j) = (x, y): (-y, x)
@@ -109,11 +118,13 @@ def free_dofs(form) -> np.ndarray:
 
 
 def displacement_layout(form, free: np.ndarray | None = None) -> DisplacementLayout:
-    """Vertex and component of every free displacement DOF of a P1(+bubble) ``form``.
+    """Vertex and component of every free displacement DOF of a MINI (P1 + condensed
+    bubble) or Taylor-Hood (hierarchical P2) ``form``.
 
     Built from each vertex's DOF numbers (:func:`vertex_dofs`), so it does not rely on
     NGSolve's DOF ordering (which for VectorH1 is: all x-components, then all y, then all z,
-    each with the vertex DOFs first).
+    each with the vertex DOFs first). Free DOFs that are no vertex's (P2 edge functions) get
+    vertex -1 and the component of their block of the ordering.
     """
     from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 
@@ -132,9 +143,12 @@ def displacement_layout(form, free: np.ndarray | None = None) -> DisplacementLay
     vert_of[dofs] = np.arange(mesh.nv)[:, None]
     comp_of[dofs] = np.arange(dim)[None, :]
     free_u = free[(free >= rng.start) & (free < rng.stop)] - rng.start
-    if np.any(vert_of[free_u] < 0):
-        raise InputError("the Krylov solver needs the MINI element (P1 + condensed bubbles); "
-                         "use the direct solver for Taylor-Hood")
+    higher = vert_of[free_u] < 0
+    if np.any(higher):
+        if V.ndof % dim or not np.array_equal(comp_of[dofs], dofs // (V.ndof // dim)):
+            raise InputError("the Krylov solver does not know this displacement space's "
+                             "DOF numbering; use the direct solver")
+        comp_of[free_u[higher]] = free_u[higher] // (V.ndof // dim)
     coords = vertex_coordinates(mesh)
     return DisplacementLayout(coords, vert_of[free_u], comp_of[free_u])
 
@@ -341,9 +355,71 @@ class _AMG:
         ml = self.ml
         return f"{len(ml.levels)} levels, operator complexity {ml.operator_complexity():.2f}"
 
+    def release(self) -> None:
+        """Drop the hierarchy and the padding plan (the next ``setup`` makes them again)."""
+        self.ml = None
+        self._padded_csr = PatternGather(self._padded_csr.transform, fill=self._fill)
+
+
+class _HierarchicalTwoLevel:
+    """One symmetric two-level cycle for a hierarchical P2 displacement block (Taylor-Hood).
+
+    The P2 space splits into its P1 part (the vertex hat functions, whose block ``A_11`` is
+    the P1 stiffness) and the edge functions, whose block is well conditioned after
+    diagonal scaling, uniformly in ``h`` (the two-level hierarchical basis method: Bank,
+    Dupont and Yserentant 1988; Axelsson and Vassilevski). So a Gauss-Seidel sweep over the
+    whole block, the P1 AMG V-cycle on the vertex DOFs and a backward sweep make a
+    symmetric cycle::
+
+        x  = GS_forward(A, r)
+        x += I_1 AMG_11(r - A x)|_1
+        x  = GS_backward(A, r) from x
+
+    Written here because pyamg's aggregation needs a nonzero near-nullspace on every node,
+    and the rigid motions vanish on the hierarchical edge functions.
+    """
+
+    def __init__(self, linear: np.ndarray, amg: _AMG) -> None:
+        self.linear = np.flatnonzero(linear)
+        self.amg = amg
+        self.A: sp.csr_matrix | None = None
+        self._sub = PatternGather(lambda A: A[self.linear][:, self.linear])
+
+    @property
+    def ml(self):
+        return self.amg.ml
+
+    def setup(self, A: sp.spmatrix) -> None:
+        self.A = sp.csr_matrix(A)
+        self.amg.setup(self._sub(self.A))
+
+    def update(self, A: sp.spmatrix) -> None:
+        self.A = sp.csr_matrix(A)
+        self.amg.update(self._sub(self.A))
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        from pyamg.relaxation.relaxation import gauss_seidel
+
+        A = self.A
+        x = np.zeros_like(r)
+        gauss_seidel(A, x, r, iterations=1, sweep="forward")
+        d = r - threaded(A) @ x
+        x[self.linear] += self.amg(d[self.linear])
+        gauss_seidel(A, x, r, iterations=1, sweep="backward")
+        return x
+
+    def describe(self) -> str:
+        return f"P1 part: {self.amg.describe()}, Gauss-Seidel on the P2 block"
+
+    def release(self) -> None:
+        self.amg.release()
+        self.A = None
+        self._sub = PatternGather(self._sub.transform)
+
 
 class BlockKrylovSolver:
-    """GMRES / MINRES with an AMG block preconditioner for ``K x = r`` (MINI tangent).
+    """GMRES / MINRES with an AMG block preconditioner for ``K x = r`` (the MINI tangent;
+    Taylor-Hood's with a two-level cycle on its P2 block, :class:`_HierarchicalTwoLevel`).
 
     ``K`` may have more rows than ``is_u``: the extra trailing rows and columns are further
     multipliers (the active contact constraints of a primal-dual active set, with a zero
@@ -423,18 +499,21 @@ class BlockKrylovSolver:
         self._ready = False
         self._block_plans: tuple[PatternGather, ...] = ()
         self._block_plans_rows = -1
-        # displacement AMG on node blocks: slot = dim * node + component
-        nodes, node_idx = np.unique(layout.vertex, return_inverse=True)
+        # displacement AMG on node blocks of the P1 DOFs: slot = dim * node + component
+        lin = layout.linear
+        nodes, node_idx = np.unique(layout.vertex[lin], return_inverse=True)
         dim = layout.dim
-        slot = dim * node_idx + layout.component
+        slot = dim * node_idx + layout.component[lin]
         B = np.zeros((dim * len(nodes), 3 if dim == 2 else 6))
-        B[slot] = layout.rigid_body_modes()
-        self._amg_u = _AMG(dim * len(nodes), slot, dim, B, amg or {})
+        B[slot] = layout.rigid_body_modes()[lin]
+        amg_1 = _AMG(dim * len(nodes), slot, dim, B, amg or {})
+        # MINI: the AMG alone; Taylor-Hood: around it, Gauss-Seidel on the P2 block
+        self._amg_u = amg_1 if lin.all() else _HierarchicalTwoLevel(lin, amg_1)
         self._amg_p = _AMG(len(self.ip), np.arange(len(self.ip)), 1, None, amg or {})
 
     @classmethod
     def from_form(cls, form, **options) -> BlockKrylovSolver:
-        """Everything the constructor needs, from a MINI :class:`MixedForm`."""
+        """Everything the constructor needs, from a MINI or Taylor-Hood :class:`MixedForm`."""
         free = free_dofs(form)
         rng = form.fes.Range(0)
         is_u = (free >= rng.start) & (free < rng.stop)
@@ -506,9 +585,8 @@ class BlockKrylovSolver:
 
     def release(self) -> None:
         """Free the AMG hierarchies and the sparse plans (a later solve makes them again)."""
-        self._amg_u.ml = self._amg_p.ml = None
-        self._amg_u._padded_csr = PatternGather(self._amg_u._padded_csr.transform,
-                                                fill=self._amg_u._fill)
+        self._amg_u.release()
+        self._amg_p.release()
         self._block_plans, self._block_plans_rows = (), -1
         self._ready = False
 

@@ -63,7 +63,7 @@ class SolverOptions:
             one Newton iteration per intermediate load step (2D headline: 20 -> 18).
         penetration_tol: contact penetration tolerance relative to the body size [-].
         max_augmentations: Uzawa updates per load step.
-        linear_solver: "pardiso", "scipy" or "krylov" (GMRES with AMG blocks, MINI only).
+        linear_solver: "pardiso", "scipy" or "krylov" (GMRES with AMG blocks).
         progress: show a progress bar over the load.
         checkpoint: restart file written after each accepted load step and read at the
             start when it holds the same problem (see the module docstring).
@@ -177,7 +177,7 @@ class NewtonSolver:
     def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
         self.form = form
         self.opt = options or SolverOptions()
-        if self.opt.linear_solver == "krylov":  # block-preconditioned GMRES (MINI only)
+        if self.opt.linear_solver == "krylov":  # block-preconditioned GMRES
             from brainbulge.solver.krylov import BlockKrylovSolver
 
             self.linear: LinearSolver = BlockKrylovSolver.from_form(form)
