@@ -46,6 +46,7 @@ def test_a_stopped_solve_resumes_from_its_last_load_step(tmp_path) -> None:
     second = _solver(path)
     sol = second.solve()
     assert sol.converged
+    assert sol.resumed_from == pytest.approx(ref.steps[0].load) and ref.resumed_from == 0
     assert second.loads[0] == pytest.approx(ref.steps[1].load)  # the stopped step, again
     assert [s.load for s in sol.steps] == pytest.approx([s.load for s in ref.steps])
     # the same state, multipliers and predictor as the uninterrupted solve had there
@@ -62,7 +63,8 @@ def test_a_restart_file_of_another_problem_is_ignored(tmp_path) -> None:
     with pytest.raises(Stop):
         _solver(path, stop_above=0.3).solve()
     other = _solver(path, key="case B")
-    assert other.solve().converged
+    sol = other.solve()
+    assert sol.converged and sol.resumed_from == 0  # said so in the summary too
     assert other.loads[0] == pytest.approx(0.25)  # started from Js = 1
     path.write_bytes(b"not an npz file")
     unreadable = _solver(path)

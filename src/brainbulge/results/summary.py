@@ -110,6 +110,7 @@ def solution_summary(
         "load_reached": sol.load,
         "load_steps": len(sol.steps),
         "rejected_steps": sol.rejected_steps,
+        "resumed_from_load": sol.resumed_from,
         "newton_iterations": sol.newton_iterations,
         "final_residual": sol.steps[-1].residual if sol.steps else None,
         "wall_time_s": round(sol.wall_time_s, 3),

@@ -161,6 +161,7 @@ class Solution:
     linear_iterations: int = 0  # Krylov iterations in all (0 with a direct solver)
     stopped_early: bool = False  # by ``SolverOptions.stop_when``, not by a failure
     rezones: int = 0  # mesh exchanges (see :mod:`brainbulge.solver.rezoning`)
+    resumed_from: float = 0.0  # load of the restart file the ramp went on from (0: none)
 
     @property
     def newton_iterations(self) -> int:
@@ -644,6 +645,7 @@ class NewtonSolver:
             resumed = self._read_checkpoint(Path(opt.checkpoint), x, sol)
             if resumed is not None:
                 t, dt, last_increment, last_dt = resumed
+                sol.resumed_from = t
                 x_prev.data = x
         bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
         bar.update(round(100 * t))
