@@ -34,6 +34,7 @@ SUMMARY_KEYS = [
     "argmax_radial_stretch", "argmax_tangential_stretch", "max_abs_J_minus_Js",
     "max_penetration", "midline_shift_mm", "swelling_volume_ml", "bulge_volume_ml",
     "brain_volume_ml", "max_pressure_kpa", "mean_pressure_mmhg", "edge_exclusion_mm",
+    "p95_principal_strain", "p95_radial_stretch", "p05_radial_stretch", "p95_csf_principal_strain",
 ]
 FILES = ["summary.json", "fields.vtu", "fields.npz", "sections.png", "run.toml", "status.json"]
 
@@ -113,6 +114,12 @@ def _check_outputs(folder) -> dict:
     summary = json.loads((folder / "summary.json").read_text())
     missing = [k for k in SUMMARY_KEYS if k not in summary]
     assert not missing, missing
+    # percentiles lie inside the extremes over the same points
+    for stem in ("radial_stretch", "tangential_stretch", "principal_strain"):
+        p95, p99, top = (summary[f"{k}_{stem}"] for k in ("p95", "p99", "max"))
+        assert p95 <= p99 <= top, stem
+    assert summary["min_radial_stretch"] <= summary["p01_radial_stretch"] <= summary[
+        "p05_radial_stretch"] < 1 < summary["p95_radial_stretch"]
     import meshio
 
     m = meshio.read(folder / "fields.vtu")

@@ -100,6 +100,7 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     assert len(sol.form.mesh.ngmesh.Elements2D()) * 6 > 10 * 97  # several chunks
     for key in ("max_radial_stretch", "min_tangential_stretch", "max_principal_strain",
                 "raw_max_radial_stretch", "max_displacement", "integral_J_minus_Js",
+                "p95_radial_stretch", "p05_tangential_stretch", "p99_principal_strain",
                 "swelling_volume", "max_abs_J_minus_Js", "argmax_radial_stretch"):
         assert chunked[key] == pytest.approx(whole[key], rel=1e-12, abs=1e-15), key
 
@@ -125,3 +126,45 @@ def test_argmax_locations_carry_their_maxima_outside_the_exclusion_disks() -> No
         value = output_fields(sample(form, form.mesh(*X)), np.zeros(2))[field]
         assert float(np.ravel(value)[0]) == pytest.approx(s[f"max_{stem}"], rel=1e-9), stem
         assert s[f"max_{stem}"] < s[f"raw_max_{stem}"]  # the excluded corners peak higher
+
+
+def test_volume_percentiles_converge_where_a_singular_maximum_does_not() -> None:
+    """``f = r^(-1/2)`` on the unit disk, the order of a corner singularity: the area fraction
+    with ``f <= v`` is ``1 - v^-4``, so the 95th area percentile is ``0.05^(-1/4) = 2.1147``,
+    the 99th ``3.1623`` and the 5th ``0.95^(-1/4) = 1.0129``. ``field_percentiles`` over the
+    quadrature points of two meshes (a vertex at the singular point) gives them within the
+    quadrature error, while the largest value grows as ``h^(-1/2)``; the points are weighted
+    by their areas (unweighted, the percentile is off by ~4 %)."""
+    import ngsolve as ngs
+    from netgen.geom2d import SplineGeometry
+
+    from brainbulge.results.quadrature import quadrature_points
+    from brainbulge.results.summary import field_percentiles
+
+    results = []
+    for h in (0.1, 0.05):
+        geo = SplineGeometry()
+        geo.AddCircle((0, 0), 1, bc="outer")
+        geo.AddPoint(0, 0, maxh=h)  # a mesh vertex at the singular point, as at a corner
+        mesh = ngs.Mesh(geo.GenerateMesh(maxh=h))
+        mesh.Curve(4)
+        q = quadrature_points(mesh, order=4)
+        f = np.hypot(q.X[:, 0], q.X[:, 1]) ** -0.5
+        fields = {"lambda_n": f, "lambda_t": f, "max_principal_strain": f}
+        keep = np.ones(len(f), dtype=bool)
+        p = field_percentiles(fields, q.weights, keep)
+        assert q.weights.sum() == pytest.approx(np.pi, rel=1e-6)
+        assert p["p95_radial_stretch"] == pytest.approx(0.05**-0.25, rel=3e-3)
+        assert p["p99_radial_stretch"] == pytest.approx(0.01**-0.25, rel=1e-2)
+        assert p["p05_tangential_stretch"] == pytest.approx(0.95**-0.25, rel=5e-3)
+        assert p["p95_principal_strain"] == p["p95_radial_stretch"]
+        assert np.percentile(f, 95) < 0.98 * 0.05**-0.25  # unweighted: off
+        results.append((f.max(), p["p95_radial_stretch"]))
+    (max_coarse, p95_coarse), (max_fine, p95_fine) = results
+    assert max_fine > 1.3 * max_coarse
+    assert p95_fine == pytest.approx(p95_coarse, rel=3e-3)
+    # a selection: only the points kept count
+    half = q.X[:, 0] > 0
+    assert field_percentiles(fields, q.weights, half)["p95_radial_stretch"] == pytest.approx(
+        0.05**-0.25, rel=3e-3)
+    assert field_percentiles(fields, q.weights, np.zeros(len(f), dtype=bool)) == {}

@@ -21,7 +21,10 @@ Clinical metrics (lengths mm, volumes ml, pressures kPa and mmHg):
 
 Stretch and strain extremes are taken over the parenchyma (gray and white matter,
 cerebellum, brainstem) outside a band of ``edge_exclusion_mm`` around the flap rim, where the
-stress is singular; ``raw_*`` over all parenchyma, ``csf_*`` over the CSF filler.
+stress is singular; ``raw_*`` over all parenchyma, ``csf_*`` over the CSF filler. The
+extremes sit at tissue interfaces (singular too) and grow under refinement; the volume
+percentiles ``p95_*``/``p99_*``/``p05_*``/``p01_*`` over the same points are the
+mesh-convergent measures (docs/outputs.md).
 """
 
 from __future__ import annotations
