@@ -168,3 +168,23 @@ def test_volume_percentiles_converge_where_a_singular_maximum_does_not() -> None
     assert field_percentiles(fields, q.weights, half)["p95_radial_stretch"] == pytest.approx(
         0.05**-0.25, rel=3e-3)
     assert field_percentiles(fields, q.weights, np.zeros(len(f), dtype=bool)) == {}
+
+
+@pytest.mark.parametrize("n", [50, 5_000, 200_000])
+def test_weighted_percentiles_sort_only_the_tail_and_match_numpy(n: int) -> None:
+    """The tail selection gives numpy's weighted inverted-cdf percentiles exactly, with
+    graded weights, ties and values concentrated in the tail."""
+    from brainbulge.results.summary import weighted_percentiles
+
+    rng = np.random.default_rng(n)
+    for v, w in (
+        (rng.normal(size=n), rng.uniform(0.1, 1, n)),
+        (np.round(rng.normal(size=n), 1), rng.uniform(0, 1, n) ** 4),  # ties, graded weights
+        (np.where(rng.uniform(size=n) < 0.97, 1.0, rng.uniform(1, 5, n)), np.ones(n)),
+        (rng.uniform(size=n), np.where(rng.uniform(size=n) < 0.01, 100.0, 0.01)),  # heavy few
+    ):
+        for qs in ((95, 99), (5, 1), (50,)):
+            expected = np.percentile(v, qs, weights=w, method="inverted_cdf")
+            np.testing.assert_array_equal(weighted_percentiles(v, w, qs), expected)
+    with pytest.raises(ValueError, match="all be"):
+        weighted_percentiles(v, w, (5, 95))

@@ -70,17 +70,54 @@ def field_extremes(
     return out
 
 
+def weighted_percentiles(v: np.ndarray, w: np.ndarray, qs: tuple[int, ...]) -> np.ndarray:
+    """numpy's weighted ``inverted_cdf`` percentiles ``qs`` (all >= 50 or all <= 50) of values
+    ``v`` with weights ``w``: ``p_q = min {v_i : sum_{v_j <= v_i} w_j >= q/100 sum_j w_j}``.
+
+    Only the tail that holds them is sorted: a threshold ``t`` from ``np.partition`` (linear
+    time) such that the points beyond it carry more than the tail's weight, then
+    ``p_q = min {v_i >= t : W(v < t) + sum_{t <= v_j <= v_i} w_j >= q W}`` (the mirror for
+    low percentiles). Exact; a full weighted sort of the 17M points of a 1.40M-tet brain took
+    7 s per field, the tail 1.9 s (both on a busy machine).
+    """
+    v = np.asarray(v, dtype=float)
+    w = np.asarray(w, dtype=float)
+    q = np.asarray(qs, dtype=float) / 100
+    n = len(v)
+    upper = bool(q.min() >= 0.5)
+    if not upper and q.max() > 0.5:
+        raise ValueError(f"percentiles {qs} must all be >= 50 or all <= 50")
+    total = w.sum()
+    m = max(int(4 * (1 - q.min() if upper else q.max()) * n), 1024)
+    while m < n:
+        if upper:
+            sel = v >= np.partition(v, n - m)[n - m]
+            if total - w[sel].sum() < q.min() * total:
+                break
+        else:
+            sel = v <= np.partition(v, m - 1)[m - 1]
+            if w[sel].sum() >= q.max() * total:
+                break
+        m *= 2
+    else:
+        return np.percentile(v, np.asarray(qs, dtype=float), weights=w, method="inverted_cdf")
+    vs, ws = v[sel], w[sel]
+    order = np.argsort(vs, kind="stable")
+    below = total - ws.sum() if upper else 0.0  # weight of the points before the tail
+    cum = below + np.cumsum(ws[order])
+    idx = np.searchsorted(cum, q * total, side="left")
+    return vs[order][np.minimum(idx, len(vs) - 1)]
+
+
 def field_percentiles(
     fields: dict[str, np.ndarray],
     weights: np.ndarray,
     keep: np.ndarray,
     prefix: str = "",
 ) -> dict[str, float]:
-    """Volume percentiles ``pXX_*`` of the ``EXTREMES`` fields over ``keep``.
-
-    ``p_q = min {v : sum_{f_i <= v} w_i >= q/100 sum_i w_i}`` with ``w_i`` the points'
-    quadrature weights (their volumes): numpy's weighted ``inverted_cdf`` percentile.
-    """
+    """Volume percentiles ``pXX_*`` of the ``EXTREMES`` fields over ``keep``: the weighted
+    percentiles of :func:`weighted_percentiles` with the points' quadrature weights (their
+    volumes) as weights."""
     out: dict[str, float] = {}
     w = np.asarray(weights, dtype=float)[keep]
     if not keep.any() or w.sum() <= 0:
@@ -89,8 +126,7 @@ def field_percentiles(
         v = np.asarray(fields[name], dtype=float)[keep]
         for kind in kinds:
             qs = PERCENTILES[kind]
-            values = np.percentile(v, qs, weights=w, method="inverted_cdf")
-            for q, x in zip(qs, values, strict=True):
+            for q, x in zip(qs, weighted_percentiles(v, w, qs), strict=True):
                 out[f"p{q:02d}_{prefix}{stem}"] = float(x)
     return out
 
