@@ -22,8 +22,12 @@ Variants (the same mesh, model and outputs):
 
 ``--refine K`` builds the fine meshes by Netgen at N / 8^K and K uniform refinements
 (cached as ``brain_N_rK``); with ``--coarse-tets N / 8^K`` the sequenced variant's meshes
-are nested. ``BRAINBULGE_KEEP_HEAP=0`` in the environment returns freed arrays to the system
-(glibc's default; ``brainbulge.heap`` keeps them: faster, a little more memory).
+are nested; with ``--flat`` the new surface nodes stay at their midpoints (cached as
+``brain_N_rK_flat``): every mesh of the family has the Netgen mesh's geometry exactly, as a
+Taylor-Hood solution on it sees it (a comparison of elements on one geometry; with
+``--coarse-tets N / 8^j`` the sequenced variant's coarse mesh is the family's member).
+``BRAINBULGE_KEEP_HEAP=0`` in the environment returns freed arrays to the system (glibc's
+default; ``brainbulge.heap`` keeps them: faster, a little more memory).
 
 The table gives tets, DOFs, mesh time, solve time (assembly / linear solve), the whole run
 with its outputs, Newton and Krylov iterations, peak resident memory, the midline shift, the
@@ -56,37 +60,50 @@ VARIANTS = {
 }
 
 
-def cached_mesh(target_tets: int, cache: Path, refine: int = 0):
+def mesh_tag(target_tets: int, refine: int = 0, flat: bool = False) -> str:
+    """``N``, ``N_rK`` or ``N_rK_flat``: the name of a mesh in the cache and of its runs."""
+    return f"{target_tets}" + (f"_r{refine}" if refine else "") + ("_flat" if flat else "")
+
+
+def cached_mesh(target_tets: int, cache: Path, refine: int = 0, flat: bool = False):
     """The ICBM152 brain mesh of about ``target_tets`` tets (Netgen at ``target_tets /
-    8**refine``, refined ``refine`` times), built once into ``cache``."""
+    8**refine``, refined ``refine`` times, new surface nodes left at their midpoints if
+    ``flat``), built once into ``cache``."""
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
 
-    path = cache / (f"brain_{target_tets}" + (f"_r{refine}" if refine else "")) / "brain.npz"
+    path = cache / f"brain_{mesh_tag(target_tets, refine, flat)}" / "brain.npz"
     if path.is_file():
         return load_brain_mesh(path)
-    bm = build_brain_mesh(target_tets=target_tets, refinements=refine)
+    bm = build_brain_mesh(target_tets=target_tets, refinements=refine,
+                          refine_onto_envelope=not flat)
     save_brain_mesh(bm, path.parent, figures=False)
     return bm
 
 
 def one(target_tets: int, steps: int, cache: Path, variant: str,
         edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False,
-        coarse_tets: int = 100_000, refine: int = 0, tolerance: float = 1e-9) -> dict:
+        coarse_tets: int = 100_000, refine: int = 0, tolerance: float = 1e-9,
+        flat: bool = False) -> dict:
     import logging
 
     from brainbulge.errors import ConvergenceError
     from brainbulge.studies.craniectomy import run_brain
 
     cache.mkdir(parents=True, exist_ok=True)
-    tag = f"{target_tets}_r{refine}" if refine else str(target_tets)
+    tag = mesh_tag(target_tets, refine, flat)
     logging.basicConfig(  # per-iteration residuals and Krylov counts, for a slow run
         level=logging.DEBUG, filename=cache / f"run_{tag}_{variant}.log", filemode="w",
         format="%(asctime)s %(name)s %(message)s")
     for noisy in ("matplotlib", "PIL"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     t0 = time.perf_counter()
-    bm = cached_mesh(target_tets, cache, refine)
-    coarse = cached_mesh(coarse_tets, cache) if variant == "sequenced" else None
+    bm = cached_mesh(target_tets, cache, refine, flat)
+    if variant != "sequenced":
+        coarse = None
+    else:  # with --flat, N / 8^j is the family's member refined K - j times
+        j = next((j for j in range(1, refine + 1) if coarse_tets * 8**j == target_tets), 0)
+        coarse = (cached_mesh(coarse_tets, cache, refine - j, flat=refine > j) if flat and j
+                  else cached_mesh(coarse_tets, cache))
     t_mesh = time.perf_counter() - t0
     out = cache / f"run_{tag}_{variant}"
     restart = out / "restart.npz"  # left by a run that was stopped
@@ -143,6 +160,9 @@ def main() -> int:
     parser.add_argument("--refine", type=int, default=0, metavar="K",
                         help="fine meshes by K uniform refinements of Netgen's mesh at N / 8^K "
                              "(with --coarse-tets N / 8^K the sequenced meshes are nested)")
+    parser.add_argument("--flat", action="store_true",
+                        help="with --refine: new surface nodes stay at their midpoints (the "
+                             "Netgen mesh's geometry exactly)")
     parser.add_argument("--tolerance", type=float, default=1e-9,
                         help="Newton's tolerance on the scaled residual at full load, for "
                              "every variant (the brain command's --tolerance)")
@@ -153,7 +173,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.one:
         r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius,
-                args.resume, args.coarse_tets, args.refine, args.tolerance)
+                args.resume, args.coarse_tets, args.refine, args.tolerance, args.flat)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
@@ -164,6 +184,7 @@ def main() -> int:
                "--edge-radius", str(args.edge_radius), "--coarse-tets", str(args.coarse_tets),
                "--refine", str(args.refine), "--tolerance", str(args.tolerance)]
         cmd += ["--resume"] if args.resume else []
+        cmd += ["--flat"] if args.flat else []
         res = subprocess.run(cmd, capture_output=True, text=True)
         lines = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
         if not lines:

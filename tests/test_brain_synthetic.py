@@ -11,6 +11,7 @@ import ngsolve as ngs
 import nibabel as nib
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from brainbulge.cli import main as cli_main
@@ -239,6 +240,26 @@ def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
     assert set(fine.flaps) == set(coarse.flaps)
     assert fine.flap_area_cm2("frontal") == pytest.approx(coarse.flap_area_cm2("frontal"),
                                                             rel=0.1)
+
+
+def test_flat_refinement_keeps_the_netgen_geometry(synthetic_image) -> None:
+    """``refine_onto_envelope=False``: the new surface nodes stay at the midpoints of the
+    coarse surface edges, so the refined mesh has exactly the coarse mesh's volume (the
+    refinement onto the envelope adds the chords' gap, > 0.1 % here)."""
+    from brainbulge.results.brain_metrics import brain_volume_ml
+
+    coarse = build_brain_mesh(synthetic_image, target_tets=4_000, brain_volume_ml=400.0)
+    flat = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,
+                            refinements=1, refine_onto_envelope=False)
+    moved = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,
+                             refinements=1)
+    v_coarse = brain_volume_ml(coarse.nodes_mm, coarse.tets)
+    assert brain_volume_ml(flat.nodes_mm, flat.tets) == pytest.approx(v_coarse, rel=1e-12)
+    assert brain_volume_ml(moved.nodes_mm, moved.tets) > (1 + 1e-3) * v_coarse
+    edges = np.sort(coarse.faces[:, [0, 1]], axis=1)
+    mid = coarse.nodes_mm[edges].mean(axis=1)
+    d, _ = cKDTree(flat.nodes_mm).query(mid)
+    assert d.max() < 1e-9  # every surface edge's midpoint is a node
 
 
 def test_too_coarse_a_mesh_to_refine_is_refused(synthetic_image) -> None:

@@ -139,6 +139,7 @@ def build_brain_mesh(
     custom_flap_diameter_mm: float = UNILATERAL_DIAMETER_MM,
     frontal_area_ratio: float = 2.0,
     refinements: int = 0,
+    refine_onto_envelope: bool = True,
 ) -> BrainMesh:
     """Build the labelled brain mesh (see module docstring).
 
@@ -152,6 +153,10 @@ def build_brain_mesh(
     ``target_tets / 8**refinements`` tets, which is then refined uniformly that many times
     (:mod:`refine`: new surface nodes on the envelope), so that mesh sequencing can start
     from the exact coarse solution; tissues, sides and flaps are tagged on the final mesh.
+    ``refine_onto_envelope=False`` leaves the new surface nodes at their midpoints: the
+    refined mesh then has exactly the Netgen mesh's geometry (its surface chords), the
+    geometry a Taylor-Hood solution on the Netgen mesh sees, for comparisons of elements and
+    mesh sizes on one geometry.
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -189,7 +194,8 @@ def build_brain_mesh(
     timings["tetmesh"] = time.perf_counter() - t0
     if refinements:
         t0 = time.perf_counter()
-        nodes, tets = refined_on_envelope(nodes, tets, envelope, refinements)
+        nodes, tets = refined_on_envelope(nodes, tets, envelope, refinements,
+                                          move=refine_onto_envelope)
         timings["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -218,13 +224,16 @@ def build_brain_mesh(
 
 
 def refined_on_envelope(nodes: np.ndarray, tets: np.ndarray, envelope: IntracranialEnvelope,
-                        refinements: int) -> tuple[np.ndarray, np.ndarray]:
+                        refinements: int, move: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """``refinements`` uniform refinements of ``(nodes, tets)`` (mm), each followed by moving
-    the new surface nodes onto the envelope (:mod:`refine`)."""
+    the new surface nodes onto the envelope (:mod:`refine`) unless ``move`` is false."""
     skull = RigidSkull(envelope, None)
     for _ in range(refinements):
         n_old = len(nodes)
         nodes, tets, _, _ = refine_uniformly(nodes, tets)
+        if not move:
+            log.info("refined: %d tets, new surface nodes left at their midpoints", len(tets))
+            continue
         faces, _ = boundary_faces(tets)
         surface_new = np.unique(faces)
         surface_new = surface_new[surface_new >= n_old]
