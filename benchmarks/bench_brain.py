@@ -62,7 +62,9 @@ VARIANTS = {
 
 def mesh_tag(target_tets: int, refine: int = 0, flat: bool = False) -> str:
     """``N``, ``N_rK`` or ``N_rK_flat``: the name of a mesh in the cache and of its runs."""
-    return f"{target_tets}" + (f"_r{refine}" if refine else "") + ("_flat" if flat else "")
+    if not refine:  # nothing refined: flat or not, the Netgen mesh
+        return f"{target_tets}"
+    return f"{target_tets}_r{refine}" + ("_flat" if flat else "")
 
 
 def cached_mesh(target_tets: int, cache: Path, refine: int = 0, flat: bool = False):

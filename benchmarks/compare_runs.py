@@ -75,7 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         if not path.is_file():
             print(f"error: no summary.json in {folder}: give run folders", file=sys.stderr)
             return 2
-        runs[label or folder] = json.loads(path.read_text())
+        try:
+            runs[label or folder] = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            print(f"error: cannot read {path}: {exc}; rerun that case", file=sys.stderr)
+            return 2
     ref = args.ref.rpartition("=")[0] or args.ref.rpartition("=")[2]
     table, over = comparison_table(runs, ref, tuple(args.keys), args.rtol)
     print(table)

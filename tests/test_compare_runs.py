@@ -42,6 +42,12 @@ def test_a_folder_without_a_summary_is_a_clear_error(compare_runs, tmp_path, cap
     ref = _run(tmp_path / "ref", midline_shift_mm=-4.0)
     assert compare_runs.main([str(tmp_path), "--ref", ref]) == 2
     assert "no summary.json" in capsys.readouterr().err
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "summary.json").write_text('{"midline_shift_mm": ')  # a run killed mid-write
+    assert compare_runs.main([str(broken), "--ref", ref]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: cannot read") and err.count("\n") == 1
 
 
 def test_relative_difference(compare_runs) -> None:
