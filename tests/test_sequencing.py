@@ -268,3 +268,37 @@ def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     assert tol_c == sequencing.COARSE_TOLERANCE > tol_f == OPTIONS.tolerance
     assert sequencing.COARSE_TOLERANCE * 1e-3 < hist_c[-1][-1] <= sequencing.COARSE_TOLERANCE
     assert hist_f[-1][-1] <= OPTIONS.tolerance
+
+
+def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
+    """At a converged state, a displacement kick at one free vertex makes the force
+    residual largest there: ``residual_site`` returns that vertex's deformed position."""
+    coarse, _ = _forms()
+    solver = NewtonSolver(coarse, OPTIONS)
+    assert solver.solve().converged
+    V = coarse.fes.components[0]
+    X = _coords(coarse.mesh)
+    free = np.zeros(coarse.fes.ndof, dtype=bool)
+    free[solver.free] = True
+    # a free interior vertex, far from the points of the contact boundary
+    inner = [v for v in range(coarse.mesh.nv)
+             if all(free[d] for d in V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
+             and np.min(np.linalg.norm(coarse.point_contacts[0].X - X[v], axis=1)) > 0.2]
+    v = inner[len(inner) // 2]
+    dofs = list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
+    x = coarse.gfu.vec
+    x.FV().NumPy()[dofs] += 0.02 * coarse.h
+    site = solver.residual_site(x)
+    np.testing.assert_allclose(site, X[v] + x.FV().NumPy()[dofs], atol=1e-12)
+
+
+def test_a_diverged_ramp_says_where_the_force_was_unbalanced() -> None:
+    """Newton limited to one iteration per attempt cannot take a load step: the message
+    and the Solution name the deformed position of the largest unbalanced force."""
+    coarse, _ = _forms()
+    sol = NewtonSolver(coarse, SolverOptions(steps=1, max_iterations=1, min_step=0.3)).solve()
+    assert not sol.converged
+    assert sol.failure_site is not None and np.all(np.isfinite(sol.failure_site))
+    assert "largest unbalanced force was at (" in sol.message
+    where = ", ".join(f"{c:.4g}" for c in sol.failure_site)
+    assert where in sol.message

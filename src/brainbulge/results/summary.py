@@ -225,4 +225,6 @@ def solution_summary(
     out["singular_points"] = [[float(c) for c in p[:dim]] for p in singular_points]
     if sol.message:
         out["message"] = sol.message
+    if not sol.converged and getattr(sol, "failure_site", None) is not None:
+        out["failure_site"] = [float(c) for c in sol.failure_site]
     return out

@@ -162,6 +162,9 @@ class Solution:
     stopped_early: bool = False  # by ``SolverOptions.stop_when``, not by a failure
     rezones: int = 0  # mesh exchanges (see :mod:`brainbulge.solver.rezoning`)
     resumed_from: float = 0.0  # load of the restart file the ramp went on from (0: none)
+    #: deformed position [length] of the vertex with the largest unbalanced force when the
+    #: last Newton attempt gave up (None: none gave up, or its residual was not finite)
+    failure_site: np.ndarray | None = None
 
     @property
     def newton_iterations(self) -> int:
@@ -230,6 +233,8 @@ class NewtonSolver:
         self.eta = self.eta_cap = ETA_MAX
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.last_linear_solution: np.ndarray | None = None
+        self.failure_site: np.ndarray | None = None  # see residual_site
+        self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
         self._new_plans()
         self.relaxation = (HotspotRelaxation(self) if self.opt.hotspot_relaxation
                            and HotspotRelaxation.applies(form) else None)
@@ -423,9 +428,35 @@ class NewtonSolver:
         # long vectors keep theirs (111k-tet brain: 10 % slower on one)
         try:
             with nullcontext() if self.inexact else serial_openblas():
-                return self._newton(x, curvature_below)
+                ok, its, norm = self._newton(x, curvature_below)
+            if not ok:
+                self.failure_site = self.residual_site(x)
+            return ok, its, norm
         finally:
             self.with_curvature = True
+
+    def residual_site(self, x: ngs.BaseVector) -> np.ndarray | None:
+        """Deformed position ``X + u`` [length] of the vertex whose free displacement DOFs
+        carry the largest force residual ``|R_v|`` at ``x`` (where a failed Newton solve left
+        its imbalance: the place to look at, or to refine); None if ``R`` is not finite."""
+        from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
+
+        R = self.residual(x)
+        if self._vertex_dofs is None:
+            mesh = self.form.mesh
+            dofs = vertex_dofs(self.form.fes.components[0], mesh)
+            dofs = np.where(dofs >= 0, dofs + self.form.fes.Range(0).start, -1)
+            self._vertex_dofs = (dofs, vertex_coordinates(mesh))
+        dofs, X = self._vertex_dofs
+        free = np.zeros(len(R), dtype=bool)
+        free[self.free] = True
+        on = (dofs >= 0) & free[np.maximum(dofs, 0)]
+        force = np.linalg.norm(np.where(on, R[np.maximum(dofs, 0)], 0.0), axis=1)
+        if not np.all(np.isfinite(force)) or not force.any():
+            return None
+        v = int(np.argmax(force))
+        u = np.where(dofs[v] >= 0, x.FV().NumPy()[np.maximum(dofs[v], 0)], 0.0)
+        return X[v] + u
 
     def _newton(self, x: ngs.BaseVector, curvature_below: float) -> tuple[bool, int, float]:
         pcs = self.form.point_contacts
@@ -680,11 +711,12 @@ class NewtonSolver:
                     log.info("  load %.4f: not converged (|R| = %.2e), cutting step", t + dt, norm)
                     dt *= 0.5
                     if dt < opt.min_step:
+                        sol.failure_site = self.failure_site
                         sol.message = (
                             f"Newton diverged at load {t + 2 * dt:.4f} of 1 (swelling "
                             f"ramp) even with a load step of {2 * dt:.2g}; the last converged "
-                            f"state (load {t:.4f}) is kept. Try more --steps, a finer mesh, "
-                            "or check the boundary conditions"
+                            f"state (load {t:.4f}) is kept{self._site_text()}. Try more "
+                            "--steps, a finer mesh, or check the boundary conditions"
                         )
                         break
                     continue
@@ -714,6 +746,13 @@ class NewtonSolver:
             form.load.Set(t)
         sol.load = t
         return self._timed(sol, start)
+
+    def _site_text(self) -> str:
+        """``; the last attempt's ... at (x, y[, z])`` for failure messages (or nothing)."""
+        if self.failure_site is None:
+            return ""
+        where = ", ".join(f"{c:.4g}" for c in self.failure_site)
+        return f"; the last attempt's largest unbalanced force was at ({where})"
 
     def equilibrate(self) -> Solution:
         """Newton at the form's current load from its current state (one carried over from
