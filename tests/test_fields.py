@@ -188,3 +188,52 @@ def test_weighted_percentiles_sort_only_the_tail_and_match_numpy(n: int) -> None
             np.testing.assert_array_equal(weighted_percentiles(v, w, qs), expected)
     with pytest.raises(ValueError, match="all be"):
         weighted_percentiles(v, w, (5, 95))
+
+
+def test_mini_outputs_are_those_of_its_p1_part() -> None:
+    """MINI's sampled displacement gradient is that of its P1 part: the element mean of the
+    full ``grad u`` (the bubbles' gradients average to zero over each element, where they do
+    vary), constant on each straight element, with ``det F`` the element's deformed area over
+    its reference area."""
+    import ngsolve as ngs
+
+    from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.results.fields import det3, sample
+    from brainbulge.results.quadrature import quadrature_points
+    from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1,
+                        element="mini")
+    form = MixedForm(hemidisk_problem(case), element="mini")
+    assert NewtonSolver(form, SolverOptions(steps=2)).solve().converged
+    mesh = form.mesh
+    q = quadrature_points(mesh, order=4)
+    els, _ = element_vertices(mesh)
+    n_el = len(els)
+    nq = len(q.weights) // n_el
+    s = sample(form, q.points)
+    F = s.F[:, :2, :2].reshape(n_el, nq, 2, 2)
+    G = np.asarray(ngs.Grad(form.u)(q.points)).reshape(n_el, nq, 2, 2)
+    w = q.weights.reshape(n_el, nq)
+    def mean(A: np.ndarray) -> np.ndarray:  # volume mean over each element
+        return np.einsum("eq,eqij->eij", w, A) / w.sum(axis=1)[:, None, None]
+
+    np.testing.assert_allclose(mean(F) - np.eye(2), mean(G), atol=1e-10)
+    assert np.ptp(G, axis=1).max() > 1e-3  # the full gradient varies inside elements
+    # straight (interior) elements: F constant, det F the deformed area ratio
+    on_bnd = np.zeros(mesh.nv, dtype=bool)
+    for el in mesh.Elements(ngs.BND):
+        on_bnd[[v.nr for v in el.vertices]] = True
+    inner = ~on_bnd[els].any(axis=1)
+    assert inner.sum() > 50
+    assert np.ptp(F[inner], axis=1).max() < 1e-10
+    X = vertex_coordinates(mesh)
+    x = X + np.asarray(form.u(mesh(X[:, 0], X[:, 1]))).reshape(-1, 2)
+
+    def area(P: np.ndarray) -> np.ndarray:
+        a, b = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+        return 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+
+    J = det3(s.F).reshape(n_el, nq)[inner, 0]
+    np.testing.assert_allclose(J, area(x[els[inner]]) / area(X[els[inner]]), rtol=1e-9)

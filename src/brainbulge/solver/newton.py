@@ -363,8 +363,8 @@ class NewtonSolver:
             c = np.concatenate([-pc.weights[pts[on]] * pc.g[pts[on]] for pc, pts, on in rows_B])
             n = K.shape[0]
             if NodalElimination.applies(B_all):  # each point's row on a node of its own
+                solved = [pts[on] for _, pts, on in rows_B]  # (none active: empty)
                 if B.shape[0]:
-                    solved = [pts[on] for _, pts, on in rows_B]
                     elimination = NodalElimination(K, B, c, self.is_u_free,
                                                    project=self._project_elimination)
                     K, b = elimination.system(b)
