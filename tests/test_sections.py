@@ -82,3 +82,31 @@ def test_plot_sections_writes_a_coloured_png(tmp_path) -> None:
     img = mpimg.imread(path)[..., :3]
     saturation = img.max(axis=2) - img.min(axis=2)
     assert (saturation > 0.3).mean() > 0.05  # coloured pixels, not just axes
+
+
+def test_plot_fields_marks_the_failure_site(tmp_path, monkeypatch) -> None:
+    """A stopped run's ``failure_site`` is a red cross at that position on every panel."""
+    import brainbulge.results.figures as figures
+    from brainbulge.results.export import VertexFields
+
+    pts = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 0.5]])
+    vals = np.array([0.9, 1.0, 1.1, 1.2])
+    vf = VertexFields(pts, np.array([[0, 1, 3], [0, 3, 2]]), np.zeros(2, dtype=int), ["a"],
+                      {"u": np.zeros((4, 2)), "lambda_n": vals, "lambda_t": vals}, {})
+    saved = {}
+    real_save = figures._save
+
+    def keep(fig, path):
+        saved["fig"] = fig
+        return real_save(fig, path)
+
+    monkeypatch.setattr(figures, "_save", keep)
+    figures.plot_fields(vf, tmp_path / "f.png", fields=("lambda_n", "lambda_t"),
+                        mark=(0.25, 0.4))
+    assert (tmp_path / "f.png").is_file()
+    panels = [ax for ax in saved["fig"].axes if ax.lines]  # (not the colour bars)
+    assert len(panels) == 2
+    for ax in panels:
+        crosses = [ln for ln in ax.lines if ln.get_marker() == "x"]
+        assert len(crosses) == 1
+        np.testing.assert_allclose(crosses[0].get_xydata(), [[0.25, 0.4]])

@@ -57,13 +57,18 @@ def plot_fields(
     path: Path,
     title: str = "",
     fields: Sequence[str] = ("u_magnitude", "u_vertical", "lambda_n", "lambda_t"),
+    mark: Sequence[float] | None = None,
 ) -> Path:
-    """Panels of fields on the deformed configuration."""
+    """Panels of fields on the deformed configuration; ``mark`` (a deformed position, e.g.
+    a stopped run's ``failure_site``) is drawn as a red cross on each."""
     fig, axes = plt.subplots(1, len(fields), figsize=(4.2 * len(fields), 2.8), squeeze=False)
     for ax, f in zip(axes[0], fields, strict=True):
         vmin, vmax = _limits(f, [vf.point_data[f]])
         im = _draw(ax, vf, f, vmin, vmax)
         _outline(ax, vf)
+        if mark is not None:
+            ax.plot(mark[0], mark[1], "x", color="red", markersize=8, mew=2,
+                    label="largest unbalanced force")
         ax.set_title(LABELS.get(f, f), fontsize=10)
         fig.colorbar(im, ax=ax, shrink=0.8)
     fig.suptitle(title, fontsize=10)

@@ -88,7 +88,8 @@ def run_hemidisk(
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
     state = "" if sol.converged else f" (stopped at load {sol.load:.3f})"
-    plot_fields(vf, out_dir / "fields.png", title=f"{_label(case)}{state}")
+    plot_fields(vf, out_dir / "fields.png", title=f"{_label(case)}{state}",
+                mark=summary.get("failure_site"))
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
