@@ -104,14 +104,22 @@ def plot_grid(
     row_label: str = "beta",
     col_label: str = "alpha",
     title: str = "",
+    notes: dict[tuple[float, float], str] | None = None,
 ) -> Path:
-    """A grid of one field: rows and columns indexed by the two keys of ``panels``."""
-    rows = sorted({k[0] for k in panels})
-    cols = sorted({k[1] for k in panels})
+    """A grid of one field: rows and columns indexed by the two keys of ``panels`` (and of
+    ``notes``). A cell with a note (a run that stopped early: its last converged state, or
+    no panel at all) shows the note in red below it; the colour range comes from the cells
+    without notes when there are any, so that a stopped run's extremes do not rescale the
+    complete ones."""
+    notes = notes or {}
+    rows = sorted({k[0] for k in (*panels, *notes)})
+    cols = sorted({k[1] for k in (*panels, *notes)})
     fig, axes = plt.subplots(
         len(rows), len(cols), figsize=(2.6 * len(cols), 1.6 * len(rows)), squeeze=False
     )
-    vmin, vmax = _limits(field, [v.point_data[field] for v in panels.values()])
+    ranged = [v.point_data[field] for k, v in panels.items() if k not in notes] or [
+        v.point_data[field] for v in panels.values()]
+    vmin, vmax = _limits(field, ranged) if ranged else (0.0, 1.0)
     im = None
     for i, rv in enumerate(rows):
         for j, cv in enumerate(cols):
@@ -120,6 +128,10 @@ def plot_grid(
             if (rv, cv) in panels:
                 im = _draw(ax, panels[(rv, cv)], field, vmin, vmax)
                 ax.set_aspect("equal")
+            if (rv, cv) in notes:
+                ax.text(0.5, -0.02 if (rv, cv) in panels else 0.5, notes[(rv, cv)],
+                        transform=ax.transAxes, ha="center", va="top", fontsize=7,
+                        color="red")
             if i == 0:
                 ax.set_title(f"{col_label} = {cv:g}", fontsize=8)
             if j == 0:

@@ -170,10 +170,42 @@ def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 
+def stopped_summary(scenario_dir: Path) -> dict[str, Any] | None:
+    """The ``summary.json`` that :func:`run_hemidisk` left in ``scenario_dir`` for a run that
+    stopped before full load (``"converged": false``: the last converged state's keys, e.g.
+    ``load_reached`` and ``failure_site``), without its ``inputs``; None if there is none."""
+    path = Path(scenario_dir) / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(summary, dict) or summary.get("converged") is not False:
+        return None
+    return {k: v for k, v in summary.items() if k != "inputs"}
+
+
+def _reached_swelling(scenario: dict, partial: dict[str, Any]) -> float:
+    """``Js`` at the load a stopped run reached: ``1 + load (Js - 1)``."""
+    return 1 + float(partial.get("load_reached", 0.0)) * (float(scenario["swelling"]) - 1)
+
+
+def _with_stopped(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[dict]:
+    """``rows`` with each failed scenario's row completed by its stopped run's summary
+    (results computed so far are reported, not dropped); its ``error`` stays."""
+    merged = []
+    for sc, r in zip(scenarios, rows, strict=True):
+        partial = None if r.get("complete") else stopped_summary(out_dir / sc["name"])
+        merged.append({**partial, **r} if partial else r)
+    return merged
+
+
 def write_study_table(rows: list[dict[str, Any]], scenarios: list[dict], path: Path) -> Path:
-    """``table.csv``: one row per scenario with its inputs and summary keys."""
+    """``table.csv``: one row per scenario with its inputs and summary keys; a scenario that
+    stopped before full load has the keys of its last converged state (``converged`` false,
+    ``load_reached``) and its ``error``."""
     import csv
 
+    rows = _with_stopped(Path(path).parent, scenarios, rows)
     keys: list[str] = []
     for r in rows:
         for k, v in r.items():
@@ -200,12 +232,19 @@ def sector_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> li
     paths = []
     done = {sc["name"] for sc, r in zip(scenarios, rows, strict=True) if r.get("complete")}
     for contact in sorted({sc["contact"] for sc in scenarios}):
-        panels = {
-            (sc["beta"], sc["alpha"]): load_vertex_fields(out_dir / sc["name"] / "fields.npz")
-            for sc in scenarios
-            if sc["contact"] == contact and sc["name"] in done
-        }
-        if not panels:
+        panels, notes = {}, {}
+        for sc in scenarios:
+            if sc["contact"] != contact:
+                continue
+            key = (sc["beta"], sc["alpha"])
+            fields = out_dir / sc["name"] / "fields.npz"
+            partial = None if sc["name"] in done else stopped_summary(out_dir / sc["name"])
+            if sc["name"] in done or (partial is not None and fields.is_file()):
+                panels[key] = load_vertex_fields(fields)
+            if sc["name"] not in done:  # drawn as far as it got, or an empty cell, labelled
+                notes[key] = (f"stopped at Js {_reached_swelling(sc, partial):.3f}"
+                              if key in panels else "no result")
+        if not panels and not notes:
             continue
         for field in ("lambda_n", "lambda_t"):
             paths.append(
@@ -214,6 +253,7 @@ def sector_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> li
                     field,
                     out_dir / f"grid_{field}_{contact}.png",
                     title=f"{field} ({contact})",
+                    notes=notes,
                 )
             )
     pairs = {}
@@ -236,12 +276,17 @@ def sector_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> li
 
 
 def disk_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[Path]:
-    """lambda_n and lambda_t for the disk positions side by side."""
-    panels = [
-        (sc["name"].removeprefix("disk_"), load_vertex_fields(out_dir / sc["name"] / "fields.npz"))
-        for sc, r in zip(scenarios, rows, strict=True)
-        if r.get("complete")
-    ]
+    """lambda_n and lambda_t for the disk positions side by side (a run that stopped early
+    as far as it got, labelled with the swelling it reached)."""
+    panels = []
+    for sc, r in zip(scenarios, rows, strict=True):
+        label, fields = sc["name"].removeprefix("disk_"), out_dir / sc["name"] / "fields.npz"
+        partial = None if r.get("complete") else stopped_summary(out_dir / sc["name"])
+        if partial is not None and fields.is_file():
+            label += f"\nstopped at Js {_reached_swelling(sc, partial):.3f}"
+        elif not r.get("complete"):
+            continue
+        panels.append((label, load_vertex_fields(fields)))
     if not panels:
         return []
     return [plot_row(panels, f, out_dir / f"disk_{f}.png") for f in ("lambda_n", "lambda_t")]

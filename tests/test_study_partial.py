@@ -1,0 +1,83 @@
+"""A study scenario that stops before full load keeps its results in the study's outputs:
+``table.csv`` reports its last converged state (``converged`` false, ``load_reached``) with
+its error, and the grid figure draws it as far as it got, labelled with the swelling reached."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+
+import brainbulge.results.figures as figures
+from brainbulge.results.export import VertexFields
+from brainbulge.studies import hemidisk as hd
+
+
+def _fields(scale: float) -> VertexFields:
+    pts = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 0.5]])
+    vals = 1 + scale * np.array([-0.1, 0.0, 0.1, 0.2])
+    return VertexFields(pts, np.array([[0, 1, 3], [0, 3, 2]]), np.zeros(2, dtype=int), ["a"],
+                        {"u": np.zeros((4, 2)), "lambda_n": vals, "lambda_t": vals}, {})
+
+
+def _study(tmp_path):
+    """Three sliding scenarios: complete, stopped at load 0.5 (partial results on disk, as
+    ``run_hemidisk`` leaves them) and failed without any result; their runner rows."""
+    scenarios = [
+        {"name": f"sliding_a{a}_b30", "alpha": float(a), "beta": 30.0, "contact": "sliding",
+         "swelling": 1.2}
+        for a in (20, 40, 60)
+    ]
+    done, stopped, failed = (tmp_path / sc["name"] for sc in scenarios)
+    for d, scale in ((done, 1.0), (stopped, 10.0)):
+        d.mkdir()
+        hd.save_vertex_fields(d / "fields.npz", _fields(scale))
+    (stopped / "summary.json").write_text(json.dumps(
+        {"case": "sliding_a40_b30", "inputs": {"alpha": 40.0}, "converged": False,
+         "load_reached": 0.5, "max_radial_stretch": 1.7, "failure_site": [0.2, 1.0]}))
+    failed.mkdir()
+    rows = [
+        {"name": scenarios[0]["name"], "complete": True, "converged": True,
+         "load_reached": 1.0, "max_radial_stretch": 1.3},
+        {"name": scenarios[1]["name"], "complete": False, "error": "Newton diverged at 0.5"},
+        {"name": scenarios[2]["name"], "complete": False, "error": "mesh failed"},
+    ]
+    return scenarios, rows
+
+
+def test_table_keeps_a_stopped_scenarios_partial_results(tmp_path) -> None:
+    scenarios, rows = _study(tmp_path)
+    hd.write_study_table(rows, scenarios, tmp_path / "table.csv")
+    table = {r["alpha"]: r for r in csv.DictReader(open(tmp_path / "table.csv"))}
+    assert table["20.0"]["converged"] == "True" and table["20.0"]["error"] == ""
+    stopped = table["40.0"]
+    assert stopped["converged"] == "False"
+    assert float(stopped["load_reached"]) == 0.5
+    assert float(stopped["max_radial_stretch"]) == 1.7
+    assert stopped["error"] == "Newton diverged at 0.5"
+    assert table["60.0"]["load_reached"] == "" and table["60.0"]["error"] == "mesh failed"
+
+
+def test_grid_draws_a_stopped_scenario_labelled(tmp_path, monkeypatch) -> None:
+    scenarios, rows = _study(tmp_path)
+    saved = []
+    real_save = figures._save
+
+    def keep(fig, path):
+        saved.append(fig)
+        return real_save(fig, path)
+
+    monkeypatch.setattr(figures, "_save", keep)
+    paths = hd.sector_figures(tmp_path, scenarios, rows)
+    assert [p.name for p in paths] == ["grid_lambda_n_sliding.png", "grid_lambda_t_sliding.png"]
+    fig = saved[0]
+    cells = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"][:3]  # alpha 20, 40, 60
+    notes = [[t.get_text() for t in ax.texts if t.get_color() == "red"] for ax in cells]
+    assert notes == [[], ["stopped at Js 1.100"], ["no result"]]  # 1 + 0.5 (1.2 - 1)
+    assert len(cells[0].collections) == 1 and len(cells[1].collections) == 1
+    assert len(cells[2].collections) == 0
+    # the colour range is the complete run's: the stopped one's larger stretches do not
+    # rescale it (lambda_n of the complete run spans 0.9-1.2)
+    vmin, vmax = cells[0].collections[0].get_clim()
+    assert vmax < 1.3 and vmin > 0.7
