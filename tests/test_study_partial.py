@@ -81,3 +81,19 @@ def test_grid_draws_a_stopped_scenario_labelled(tmp_path, monkeypatch) -> None:
     # rescale it (lambda_n of the complete run spans 0.9-1.2)
     vmin, vmax = cells[0].collections[0].get_clim()
     assert vmax < 1.3 and vmin > 0.7
+
+
+def test_cli_message_tells_stopped_from_failed(tmp_path) -> None:
+    """The study's closing message counts the scenarios that stopped before full load (their
+    partial results kept; a rerun repeats them) apart from those that failed otherwise."""
+    from brainbulge.cli.study import incomplete_text
+
+    scenarios, _ = _study(tmp_path)
+    (tmp_path / scenarios[0]["name"] / "summary.json").write_text(
+        json.dumps({"name": scenarios[0]["name"], "complete": True, "converged": True}))
+    for sc in scenarios[1:]:
+        (tmp_path / sc["name"] / "error.json").write_text(json.dumps({"error": "x"}))
+    text = incomplete_text(tmp_path, scenarios)
+    assert text.startswith("1 stopped before full load")
+    assert "1 failed (rerun the same command to retry them)" in text
+    assert text.endswith(f"see {tmp_path}/study.json")

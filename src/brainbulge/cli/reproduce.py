@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
-from brainbulge.cli.study import StudyIncomplete, run_study_and_report
+from brainbulge.cli.study import StudyIncomplete, incomplete_text, run_study_and_report
 
 
 def add_parser(sub: Any) -> None:
@@ -56,13 +56,15 @@ def run_command(args: argparse.Namespace) -> int:
     out = start_run(args, {"command": "reproduce", "tets": args.tets}, resume=resume)
     (out / "study.json").write_text(json.dumps({"study": "reproduce", "parts": list(parts)}))
     names = {"sector": "hemidisk-sector", "disk": "hemidisk-disk", "craniectomy": "craniectomy"}
-    failed = 0
+    failed, texts = 0, []
     for i, (part, scenarios) in enumerate(parts.items(), start=1):
         print(f"{i}/{len(parts)} {part} ({len(scenarios)} runs) -> {out / part}")
         ok = run_study_and_report(names[part], scenarios, out / part, args.scheduler,
                                   args.workers)
-        failed += len(scenarios) - ok
+        if ok < len(scenarios):
+            failed += len(scenarios) - ok
+            texts.append(f"{part}: {incomplete_text(out / part, scenarios)}")
     if failed:
-        raise StudyIncomplete(f"{failed} scenarios failed; rerun the same command to retry them")
+        raise StudyIncomplete(f"{failed} scenarios did not complete ({'; '.join(texts)})")
     finish_run(out)
     return 0

@@ -87,11 +87,30 @@ def run_command(args: argparse.Namespace) -> int:
     n_ok = run_study_and_report(args.name, scenarios, out, args.scheduler, args.workers)
     if n_ok < len(scenarios):
         raise StudyIncomplete(
-            f"{len(scenarios) - n_ok} of {len(scenarios)} scenarios failed (see "
-            f"{out}/study.json); rerun the same command to retry them"
+            f"{len(scenarios) - n_ok} of {len(scenarios)} scenarios did not complete: "
+            f"{incomplete_text(out, scenarios)}"
         )
     finish_run(out)
     return 0
+
+
+def incomplete_text(out: Path, scenarios: list[dict]) -> str:
+    """What became of a study's scenarios that did not complete: those that stopped before
+    full load (Newton diverged; their last converged state is on disk and in the table and
+    figures, and a rerun computes the same again) and those that failed otherwise (a rerun
+    retries them)."""
+    from brainbulge.studies.runner import ERROR_FILE, stopped_summary
+
+    failed = [sc for sc in scenarios if (out / sc["name"] / ERROR_FILE).is_file()]
+    n_stopped = sum(stopped_summary(out / sc["name"]) is not None for sc in failed)
+    parts = []
+    if n_stopped:
+        parts.append(f"{n_stopped} stopped before full load (their last converged states are "
+                     "in table.csv and the figures; a rerun computes the same again)")
+    if len(failed) > n_stopped:
+        parts.append(f"{len(failed) - n_stopped} failed (rerun the same command to retry them)")
+    return "; ".join(parts or ["rerun the same command to retry them"]) + (
+        f"; see {out}/study.json")
 
 
 class StudyIncomplete(BrainbulgeError):

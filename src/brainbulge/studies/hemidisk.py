@@ -34,6 +34,7 @@ from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.summary import solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.rezoning import Rezoning, solve_with_rezoning
+from brainbulge.studies.runner import stopped_summary
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
 SECTOR_BETAS = (30.0, 60.0, 90.0, 120.0)
@@ -167,20 +168,6 @@ def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
     config = {k: v for k, v in scenario.items() if k != "name"}
     config["name"] = scenario["name"]
     summary = run_hemidisk(config, scenario_dir)
-    return {k: v for k, v in summary.items() if k != "inputs"}
-
-
-def stopped_summary(scenario_dir: Path) -> dict[str, Any] | None:
-    """The ``summary.json`` that :func:`run_hemidisk` left in ``scenario_dir`` for a run that
-    stopped before full load (``"converged": false``: the last converged state's keys, e.g.
-    ``load_reached`` and ``failure_site``), without its ``inputs``; None if there is none."""
-    path = Path(scenario_dir) / "summary.json"
-    try:
-        summary = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(summary, dict) or summary.get("converged") is not False:
-        return None
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 

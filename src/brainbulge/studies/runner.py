@@ -210,6 +210,18 @@ def _read_json(path: Path) -> Any:
         return None
 
 
+def stopped_summary(scenario_dir: Path) -> dict[str, Any] | None:
+    """The ``summary.json`` a task left in ``scenario_dir`` for a run that stopped before
+    full load and raised (``"converged": false``: the last converged state's keys, e.g.
+    ``load_reached`` and ``failure_site``; the hemidisk and brain tasks write one), without
+    its ``inputs``; None if there is none (a completed scenario's summary says
+    ``"complete": true`` and has no ``converged`` false)."""
+    summary = _read_json(Path(scenario_dir) / SUMMARY_FILE)
+    if not isinstance(summary, dict) or summary.get("converged") is not False:
+        return None
+    return {k: v for k, v in summary.items() if k != "inputs"}
+
+
 def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any]) -> dict | None:
     """The stored summary if the scenario finished before with the same parameters."""
     summary = _read_json(scenario_dir / SUMMARY_FILE)
