@@ -1,4 +1,4 @@
-"""A study scenario that stops before full load keeps its results in the study's outputs:
+"""A hemidisk run that stops before full load says why, and a study keeps its results:
 ``table.csv`` reports its last converged state (``converged`` false, ``load_reached``) with
 its error, and the grid figure draws it as far as it got, labelled with the swelling reached."""
 
@@ -97,3 +97,27 @@ def test_cli_message_tells_stopped_from_failed(tmp_path) -> None:
     assert text.startswith("1 stopped before full load")
     assert "1 failed (rerun the same command to retry them)" in text
     assert text.endswith(f"see {tmp_path}/study.json")
+
+
+def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
+    """Stopped with the largest unbalanced force on a rounded cut edge, the message says so
+    instead of suggesting more steps or a finer mesh; elsewhere the solver's advice stays."""
+    from brainbulge.model.hemidisk import HemidiskCase
+    from brainbulge.solver.newton import DIVERGENCE_ADVICE
+
+    case = HemidiskCase(alpha=80, beta=30, contact="sliding")
+    skull = case.skull
+    centres = skull.edge_centres()
+    half = np.radians(15.0)
+    np.testing.assert_allclose(centres, 1.05 * np.array(
+        [[np.cos(np.pi / 2 - half), np.sin(np.pi / 2 - half)],
+         [np.cos(np.pi / 2 + half), np.sin(np.pi / 2 + half)]]))
+    on_edge = centres[1] + 0.05 * np.array([1.0, 0.0])  # on the left rounding
+    np.testing.assert_allclose(skull.gap_numpy(on_edge[None]), [0.0], atol=1e-12)
+    assert skull.near_cut_edge(on_edge) and not skull.near_cut_edge(np.array([0.0, 0.5]))
+    message = f"Newton diverged at load 0.6 ...; the last state is kept. {DIVERGENCE_ADVICE}"
+    text = hd.stopped_message(case, message, list(on_edge))
+    assert DIVERGENCE_ADVICE not in text and "rounded cut edge" in text
+    assert text.startswith("Newton diverged at load 0.6")
+    assert hd.stopped_message(case, message, [0.0, 0.5]) == message
+    assert hd.stopped_message(case, message, None) == message

@@ -68,6 +68,19 @@ class RigidSkull2D:
         in_opening = half - ngs.IfPos(delta, delta, -delta)  # > 0 inside the opening
         return ngs.IfPos(in_opening, d_end, band) - rho
 
+    def edge_centres(self) -> np.ndarray:
+        """Centres ``(R + rho) (cos, sin)(theta_o -+ beta/2)`` of the two rounded cut edges,
+        shape (2, 2) [length]."""
+        R1, _, half, _ = self._core
+        th = math.radians(self.center_deg) + np.array([-half, half])
+        return R1 * np.column_stack([np.cos(th), np.sin(th)])
+
+    def near_cut_edge(self, x: np.ndarray, within: float = 2.0) -> bool:
+        """Whether the point ``x`` (2,) [length] lies within ``within`` edge radii of a
+        rounded cut edge's centre (on the rounding, or on the tissue pressed around it)."""
+        d = np.linalg.norm(self.edge_centres() - np.asarray(x, dtype=float)[:2], axis=1)
+        return bool(d.min() < within * self.edge_radius)
+
     def gap_numpy(self, x: np.ndarray) -> np.ndarray:
         """``g`` at points ``x`` of shape (n, 2) [length]."""
         return self.gap_and_normal(x)[0]

@@ -41,6 +41,11 @@ from brainbulge.solver.threads import serial_openblas
 log = logging.getLogger("brainbulge")
 
 
+#: the advice that ends the message of a load ramp that stopped (a case that knows better,
+#: e.g. a hemidisk stopped on the skull's rounded cut edge, replaces it)
+DIVERGENCE_ADVICE = "Try more --steps, a finer mesh, or check the boundary conditions"
+
+
 @dataclass
 class SolverOptions:
     """Load stepping and Newton controls.
@@ -715,8 +720,8 @@ class NewtonSolver:
                         sol.message = (
                             f"Newton diverged at load {t + 2 * dt:.4f} of 1 (swelling "
                             f"ramp) even with a load step of {2 * dt:.2g}; the last converged "
-                            f"state (load {t:.4f}) is kept{self._site_text()}. Try more "
-                            "--steps, a finer mesh, or check the boundary conditions"
+                            f"state (load {t:.4f}) is kept{self._site_text()}. "
+                            f"{DIVERGENCE_ADVICE}"
                         )
                         break
                     continue

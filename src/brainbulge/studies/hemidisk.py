@@ -33,6 +33,7 @@ from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_si
 from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.summary import solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.newton import DIVERGENCE_ADVICE
 from brainbulge.solver.rezoning import Rezoning, solve_with_rezoning
 from brainbulge.studies.runner import stopped_summary
 
@@ -88,13 +89,33 @@ def run_hemidisk(
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
-    state = "" if sol.converged else f" (stopped at load {sol.load:.3f})"
+    js = 1 + sol.load * (case.swelling - 1)
+    state = "" if sol.converged else f" (stopped at Js {js:.3f}, load {sol.load:.3f})"
     plot_fields(vf, out_dir / "fields.png", title=f"{_label(case)}{state}",
                 mark=summary.get("failure_site"))
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
-        raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
+        raise ConvergenceError(
+            f"{stopped_message(case, sol.message, summary.get('failure_site'))}; partial "
+            f"results (up to Js = {js:.3f}) in {out_dir}")
     return summary
+
+
+#: why a hemidisk ramp stops on the skull's rounded cut edge (docs/design.md, Rezoning)
+CUT_EDGE_ADVICE = (
+    "That is on the skull's rounded cut edge: the tissue pressed around it is squeezed in "
+    "a thin layer, which a finer mesh sharpens and more steps do not get past (a known "
+    "limit for small openings with large swelling regions, docs/design.md); with a larger "
+    "opening (--beta) or a smaller swelling region the case runs to full load"
+)
+
+
+def stopped_message(case: HemidiskCase, message: str, site: Any) -> str:
+    """The solver's message for a stopped ramp, its closing advice replaced by
+    :data:`CUT_EDGE_ADVICE` when the largest unbalanced force sat at a rounded cut edge."""
+    if site is None or not case.skull.near_cut_edge(np.asarray(site)):
+        return message
+    return message.replace(DIVERGENCE_ADVICE, CUT_EDGE_ADVICE)
 
 
 def _expected_area_ratio(case: HemidiskCase) -> float:
