@@ -96,9 +96,9 @@ def run_command(args: argparse.Namespace) -> int:
 
 def incomplete_text(out: Path, scenarios: list[dict]) -> str:
     """What became of a study's scenarios that did not complete: those that stopped before
-    full load (Newton diverged; their last converged state is on disk and in the table and
-    figures, and a rerun computes the same again) and those that failed otherwise (a rerun
-    retries them)."""
+    full load (Newton diverged; their last converged state is kept in their folders, and for
+    the hemidisk studies in the table and figures too; a rerun computes the same again) and
+    those that failed otherwise (a rerun retries them)."""
     from brainbulge.studies.runner import ERROR_FILE, stopped_summary
 
     failed = [sc for sc in scenarios if (out / sc["name"] / ERROR_FILE).is_file()]
@@ -106,7 +106,7 @@ def incomplete_text(out: Path, scenarios: list[dict]) -> str:
     parts = []
     if n_stopped:
         parts.append(f"{n_stopped} stopped before full load (their last converged states are "
-                     "in table.csv and the figures; a rerun computes the same again)")
+                     "kept in their folders; a rerun computes the same again)")
     if len(failed) > n_stopped:
         parts.append(f"{len(failed) - n_stopped} failed (rerun the same command to retry them)")
     return "; ".join(parts or ["rerun the same command to retry them"]) + (

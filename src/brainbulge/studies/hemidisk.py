@@ -89,7 +89,7 @@ def run_hemidisk(
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
-    js = 1 + sol.load * (case.swelling - 1)
+    js = reached_swelling(case.swelling, sol.load)
     state = "" if sol.converged else f" (stopped at Js {js:.3f}, load {sol.load:.3f})"
     plot_fields(vf, out_dir / "fields.png", title=f"{_label(case)}{state}",
                 mark=summary.get("failure_site"))
@@ -192,9 +192,15 @@ def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 
+def reached_swelling(swelling: float, load: float) -> float:
+    """``Js`` at the load factor a run reached, ``1 + load (Js - 1)`` (the ramp of
+    :meth:`MixedForm.Js_current`)."""
+    return 1 + float(load) * (float(swelling) - 1)
+
+
 def _reached_swelling(scenario: dict, partial: dict[str, Any]) -> float:
-    """``Js`` at the load a stopped run reached: ``1 + load (Js - 1)``."""
-    return 1 + float(partial.get("load_reached", 0.0)) * (float(scenario["swelling"]) - 1)
+    """``Js`` a stopped scenario reached, from its partial summary's ``load_reached``."""
+    return reached_swelling(scenario["swelling"], partial.get("load_reached", 0.0))
 
 
 def _with_stopped(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[dict]:
