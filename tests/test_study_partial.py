@@ -105,8 +105,8 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
     from brainbulge.model.hemidisk import HemidiskCase
     from brainbulge.solver.newton import DIVERGENCE_ADVICE
 
-    case = HemidiskCase(alpha=80, beta=30, contact="sliding")
-    skull = case.skull
+    case = HemidiskCase(alpha=80, beta=30, contact="sliding", skull="rigid")
+    skull = case.obstacle
     centres = skull.edge_centres()
     half = np.radians(15.0)
     np.testing.assert_allclose(centres, 1.05 * np.array(

@@ -36,6 +36,14 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--contact", choices=("sliding", "noslip"), default="sliding")
     p.add_argument(
+        "--skull",
+        choices=("paper", "rigid"),
+        default="paper",
+        help="paper: the paper's zero-thickness skull arc with a sharp edge, the opening "
+        "traction-free (default); rigid: a rigid shell of finite thickness with rounded cut "
+        "edges, also in contact with the opening (an extension, docs/model.md)",
+    )
+    p.add_argument(
         "--contact-method",
         choices=("active-set", "augmented"),
         default="active-set",
@@ -58,7 +66,8 @@ def add_parser(sub: Any) -> None:
         "points, where the max_*/min_* extremes sit [units of R] (default h/10)",
     )
     p.add_argument("--steps", type=int, default=4, help="initial number of load steps")
-    p.add_argument("--element", choices=("taylor-hood", "mini"), default="taylor-hood")
+    p.add_argument("--element", choices=("mini", "taylor-hood"), default="mini",
+                   help="MINI (P1 + bubble / P1, the default) or Taylor-Hood (P2/P1)")
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")
     p.add_argument(
         "--edge-exclusion",
@@ -70,7 +79,7 @@ def add_parser(sub: Any) -> None:
         "--skull-edge-radius",
         type=float,
         default=0.05,
-        help="rounding radius of the skull's cut edge [units of R]",
+        help="rounding radius of the rigid skull's cut edge (--skull rigid) [units of R]",
     )
     p.add_argument(
         "--rezone",
@@ -93,6 +102,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "disk": disk,
         "swelling": swelling,
         "contact": args.contact,
+        "skull": args.skull,
         "contact_method": args.contact_method,
         "R": args.radius,
         "mesh_size": args.mesh_size,

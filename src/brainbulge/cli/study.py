@@ -30,6 +30,8 @@ def add_parser(sub: Any) -> None:
                    help="element size at the singular points [units of R] (default h/5)")
     p.add_argument("--rim-mesh-size", type=float, default=None,
                    help="element size on the edge-exclusion circles [units of R] (default h/10)")
+    p.add_argument("--skull", choices=("paper", "rigid"), default="paper",
+                   help="2D skull model (hemidisk studies): the paper's arc or a rigid shell")
     p.add_argument("--tets", type=int, default=30_000,
                    help="brain mesh size in tets (craniectomy study)")
     p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
@@ -54,7 +56,7 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
         return craniectomy_scenarios(
             tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps
         )
-    common = {"mesh_size": args.mesh_size, "steps": args.steps}
+    common = {"mesh_size": args.mesh_size, "steps": args.steps, "skull": args.skull}
     for key in ("corner_mesh_size", "rim_mesh_size"):  # only when given: a rerun of an
         if getattr(args, key) is not None:  # older study folder keeps its scenarios
             common[key] = getattr(args, key)
@@ -143,7 +145,10 @@ def run_study_and_report(
     )
     hd.write_study_table(rows, scenarios, out / "table.csv")
     if name == "hemidisk-sector":
+        from brainbulge.studies.trends import write_sector_report
+
         hd.sector_figures(out, scenarios, rows)
+        write_sector_report(out, scenarios, rows)
     else:
         hd.disk_figures(out, scenarios, rows)
     return sum(1 for r in rows if r.get("complete"))

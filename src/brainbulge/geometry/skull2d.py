@@ -1,6 +1,10 @@
-"""The rigid skull of the 2D hemidisk as a signed distance function (an obstacle).
+"""The 2D hemidisk's skull as an obstacle: the paper's arc, and a rigid shell (an extension).
 
-The skull is a circular shell of inner radius ``R`` and thickness ``T`` with an opening of
+:class:`SkullArc2D` is the paper's skull (MODEL.md section 4, the default): the circle
+``r = R`` outside the opening, of zero thickness and with a sharp edge at the opening angles.
+
+:class:`RigidSkull2D` is an extension, a rigid body of finite thickness. The skull is a
+circular shell of inner radius ``R`` and thickness ``T`` with an opening of
 angle ``beta`` centred at angle ``theta_o``. Its cut faces have rounded edges of radius ``rho``:
 the body is the set of points within ``rho`` of a *core*, the annular sector
 ``R + rho <= r <= R + T - rho`` outside the opening, so that its inner surface is exactly the
@@ -25,6 +29,65 @@ import ngsolve as ngs
 import numpy as np
 
 from brainbulge.errors import InputError
+
+
+def _opening_frame(x: np.ndarray, center_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Radius ``r`` and angle ``delta`` from the opening's centre (in (-pi, pi]) of points
+    ``x`` (n, 2) [length, rad]."""
+    th = math.radians(center_deg)
+    xr = x[:, 0] * math.cos(th) + x[:, 1] * math.sin(th)
+    yr = -x[:, 0] * math.sin(th) + x[:, 1] * math.cos(th)
+    return np.hypot(xr, yr), np.arctan2(yr, xr)
+
+
+@dataclass(frozen=True)
+class SkullArc2D:
+    """The paper's 2D skull: the arc ``r = R`` at angles outside the opening of ``beta_deg``
+    centred at ``center_deg`` (zero thickness, sharp edges at ``center_deg -+ beta_deg/2``).
+
+    The sliding condition holds on the material arc, the part of the tissue's boundary that
+    lies on the skull at rest: it slides without friction on the circle and may separate
+    inward. As an obstacle for that boundary the gap is
+
+        g(x) = R - |x|,       grad g = -x / |x|,
+
+    on the whole circle: a point of the material arc that slides past the edge's angle stays
+    on the circle's side (releasing it there made the material corner, which sits at the
+    sharp edge, alternate between pressed and free, and the Newton iteration with it). The
+    opening is traction-free and meets no obstacle; :meth:`crossing` reports how far the
+    deformed tissue reaches beyond the arc where the skull is.
+    """
+
+    R: float = 1.0
+    beta_deg: float = 60.0
+    center_deg: float = 90.0
+
+    @property
+    def _half(self) -> float:
+        """Half the opening angle [rad], less a round-off margin: the opening's corner
+        vertices, at the edge's angle exactly, belong to the skull."""
+        return math.radians(self.beta_deg) / 2 - 1e-9
+
+    def gap(self, x: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
+        """``g(x)`` for a 2-vector CF ``x`` [length]."""
+        return self.R - ngs.sqrt(x[0] * x[0] + x[1] * x[1] + 1e-30)
+
+    def gap_numpy(self, x: np.ndarray) -> np.ndarray:
+        """``g`` at points ``x`` of shape (n, 2) [length]."""
+        return self.gap_and_normal(x)[0]
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``g`` and ``grad g = -x/|x|`` at points ``x`` (n, 2) [length, -]."""
+        r = np.hypot(x[:, 0], x[:, 1])
+        return self.R - r, -x / np.maximum(r, 1e-300)[:, None]
+
+    def crossing(self, x: np.ndarray) -> float:
+        """``max_skull_crossing``: the largest ``|x| - R > 0`` of points ``x`` (n, 2) at
+        angles outside the opening (where the skull is), 0 when none [length]: how far the
+        deformed tissue reaches beyond the skull (a bulge folding back over it)."""
+        r, delta = _opening_frame(np.asarray(x, dtype=float), self.center_deg)
+        beyond = (r - self.R)[np.abs(delta) >= self._half]
+        return float(max(beyond.max(initial=0.0), 0.0))
 
 
 @dataclass(frozen=True)

@@ -1,20 +1,30 @@
 """The hemidisk cases of MODEL.md sections 4-5 as :class:`Problem` s.
 
-Contact conditions on the curved boundary:
+The base is clamped. The skull is ``paper`` (the default) or ``rigid`` (an extension).
 
-- ``noslip``: frictional, no sliding: ``u = 0`` on the skull part of the arc; the opening
-  part is free but still cannot enter the rigid skull (frictionless unilateral contact with
-  :class:`RigidSkull2D`): tissue that bulges out next to an opening corner turns around it
-  and, without this, passed into the skull's cut face (0.027 R in the headline case,
-  0.046 R with alpha 80 / beta 30, where the corner elements then inverted);
+``skull = "paper"``, the paper's model (its section 3): the skull is the arc ``r = R`` outside
+the opening, of zero thickness with a sharp edge (:class:`SkullArc2D`); the opening arc is
+traction-free and meets no obstacle.
+
+- ``noslip``: ``u = 0`` on the skull arc ("the boundary nodes are fixed");
+- ``sliding``: the skull arc's boundary slides without friction on the circle ``r = R`` over
+  the skull's angular extent, may separate inward, and is released once it passes the edge
+  (unilateral contact with :class:`SkullArc2D`), so the tissue "rotates outward around the
+  opening edge".
+
+``skull = "rigid"``, an extension: a rigid shell of thickness ``skull_thickness`` with cut
+edges rounded by ``skull_edge_radius`` (:class:`RigidSkull2D`), the rounding in the bone.
+
+- ``noslip``: ``u = 0`` on the skull part of the arc; the opening part is free but cannot
+  enter the shell's cut faces (frictionless unilateral contact);
 - ``sliding``: frictionless unilateral contact of the whole arc (skull part and opening) with
-  the rigid skull of :class:`RigidSkull2D`, so tissue can slide along the skull, separate
-  from it, and bulge through the opening around the rounded cut edges. ``contact_method``
-  ``active-set`` (default): exact contact pressures at the boundary nodes by a primal-dual
-  active set; ``augmented``: an augmented Lagrangian at integration points (the headline
-  case: 18 against 123 Newton iterations, the same displacements within 0.1%).
+  the shell, so tissue slides along it and bulges around the rounded cut edges. Known limit:
+  with small openings and large swelling regions (alpha 60-80, beta 30) the tissue pressed
+  around the rounding is squeezed in a layer one element thick and the ramp stops
+  (docs/known-limits.md).
 
-The base is clamped in both.
+``contact_method`` ``active-set`` (default): exact contact pressures at the boundary nodes by
+a primal-dual active set; ``augmented``: an augmented Lagrangian at integration points.
 """
 
 from __future__ import annotations
@@ -25,11 +35,12 @@ import ngsolve as ngs
 
 from brainbulge.errors import InputError
 from brainbulge.geometry.hemidisk import Hemidisk
-from brainbulge.geometry.skull2d import RigidSkull2D
+from brainbulge.geometry.skull2d import RigidSkull2D, SkullArc2D
 from brainbulge.materials import MooneyRivlin, preset
 from brainbulge.model.problem import Contact, Problem
 
 CONTACTS = ("sliding", "noslip")
+SKULLS = ("paper", "rigid")
 
 
 @dataclass
@@ -45,13 +56,14 @@ class HemidiskCase:
     disk: list[float] | None = None
     swelling: float = 1.2
     contact: str = "sliding"
+    skull: str = "paper"
     contact_method: str = "active-set"
     R: float = 1.0
     mesh_size: float = 0.05
     corner_mesh_size: float | None = None
     rim_mesh_size: float | None = None
     steps: int = 4
-    element: str = "taylor-hood"
+    element: str = "mini"
     material: str = "paper"
     tissue: str = "gray"
     skull_thickness: float = 0.2
@@ -64,6 +76,9 @@ class HemidiskCase:
     def __post_init__(self) -> None:
         if self.contact not in CONTACTS:
             raise InputError(f"contact {self.contact!r} unknown; choose 'sliding' or 'noslip'")
+        if self.skull not in SKULLS:
+            raise InputError(f"skull {self.skull!r} unknown; choose 'paper' (the paper's arc) "
+                             "or 'rigid' (a rigid shell with rounded cut edges)")
         if self.contact_method not in ("active-set", "augmented"):
             raise InputError(f"contact method {self.contact_method!r} unknown; choose "
                              "'active-set' or 'augmented'")
@@ -122,7 +137,15 @@ class HemidiskCase:
         )
 
     @property
-    def skull(self) -> RigidSkull2D:
+    def skull_arc(self) -> SkullArc2D:
+        """The paper's skull: the arc ``r = R`` outside the opening."""
+        return SkullArc2D(R=self.R, beta_deg=self.beta, center_deg=self.opening_center)
+
+    @property
+    def obstacle(self) -> SkullArc2D | RigidSkull2D:
+        """The skull the tissue is in contact with: the paper's arc or the rigid shell."""
+        if self.skull == "paper":
+            return self.skull_arc
         return RigidSkull2D(
             R=self.R,
             beta_deg=self.beta,
@@ -141,19 +164,19 @@ class HemidiskCase:
 def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Problem:
     """Mesh the hemidisk (or take ``mesh``, e.g. a rezoned one) and set materials, swelling
     and the contact condition."""
-    skull = case.skull
+    skull = case.obstacle
     if mesh is None:
         mesh = case.mesh()
     m = case.tissue_material()
     materials = {r: m for r in set(mesh.GetMaterials())}
     swelling = {"swelling": case.swelling}
     if case.contact == "noslip":
-        opening = [Contact("opening", skull, case.contact_method)] if case.beta > 0 else []
+        opening = []  # the paper's opening is traction-free and meets no obstacle
+        if case.skull == "rigid" and case.beta > 0:
+            opening = [Contact("opening", skull, case.contact_method)]
         return Problem(mesh, materials, swelling, clamped="base|skull", contacts=opening)
+    sliding = "skull" if case.skull == "paper" else "skull|opening"
     return Problem(
-        mesh,
-        materials,
-        swelling,
-        clamped="base",
-        contacts=[Contact("skull|opening", skull, case.contact_method)],
+        mesh, materials, swelling, clamped="base",
+        contacts=[Contact(sliding, skull, case.contact_method)],
     )

@@ -86,6 +86,8 @@ def run_hemidisk(
     summary["rezones"] = sol.rezones
     summary["swelling_area_ratio_expected"] = _expected_area_ratio(case)
     vf = vertex_fields(form, centre)
+    x = vf.points[:, :2] + vf.point_data["u"][:, :2]  # deformed vertex positions
+    summary["max_skull_crossing"] = case.skull_arc.crossing(x)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
@@ -113,7 +115,7 @@ CUT_EDGE_ADVICE = (
 def stopped_message(case: HemidiskCase, message: str, site: Any) -> str:
     """The solver's message for a stopped ramp, its closing advice replaced by
     :data:`CUT_EDGE_ADVICE` when the largest unbalanced force sat at a rounded cut edge."""
-    if site is None or not case.skull.near_cut_edge(np.asarray(site)):
+    if site is None or case.skull != "rigid" or not case.obstacle.near_cut_edge(np.asarray(site)):
         return message
     return message.replace(DIVERGENCE_ADVICE, CUT_EDGE_ADVICE)
 

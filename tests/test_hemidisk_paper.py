@@ -1,0 +1,159 @@
+"""The paper's 2D skull (the default): a zero-thickness arc ``r = R`` outside the opening, a
+traction-free opening, no-slip (arc fixed) or frictionless sliding on the arc."""
+
+from __future__ import annotations
+
+import math
+
+import ngsolve as ngs
+import numpy as np
+import pytest
+
+from brainbulge.geometry.skull2d import SkullArc2D
+from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+
+def _solve(**kw):
+    case = HemidiskCase(**kw)
+    problem = hemidisk_problem(case)
+    form = MixedForm(problem, element=case.element)
+    sol = NewtonSolver(form, SolverOptions(steps=case.steps)).solve()
+    assert sol.converged, sol.message
+    return case, problem, form, sol
+
+
+@pytest.fixture(scope="module")
+def noslip():
+    return _solve(contact="noslip", mesh_size=0.1, steps=2)
+
+
+@pytest.fixture(scope="module")
+def sliding():
+    return _solve(contact="sliding", mesh_size=0.1, steps=2)
+
+
+def _arc_vertices(mesh: ngs.Mesh, name: str) -> np.ndarray:
+    names = mesh.GetBoundaries()
+    return np.unique([v.nr for el in mesh.Elements(ngs.BND) if names[el.index] == name
+                      for v in el.vertices])
+
+
+def _deformed(form, vertices: np.ndarray) -> np.ndarray:
+    X = np.array([form.mesh.vertices[int(v)].point for v in vertices])
+    u = np.array([form.u(form.mesh(*p)) for p in X])
+    return X + u
+
+
+def test_arc_gap_and_normal() -> None:
+    """The material arc's obstacle: ``g = R - r`` on the circle, its normal the gradient of
+    ``g`` (central differences); the symbolic gap equals the array one."""
+    skull = SkullArc2D(R=1.0, beta_deg=60, center_deg=90)
+    th = np.radians([10.0, 59.0, 60.0, 61.0, 90.0, 120.0, 150.0])
+    x = 0.97 * np.column_stack([np.cos(th), np.sin(th)])
+    g, n = skull.gap_and_normal(x)
+    np.testing.assert_allclose(g, 0.03, atol=1e-12)
+    e = 1e-6
+    fd = np.column_stack([(skull.gap_numpy(x + [e, 0]) - skull.gap_numpy(x - [e, 0])) / (2 * e),
+                          (skull.gap_numpy(x + [0, e]) - skull.gap_numpy(x - [0, e])) / (2 * e)])
+    np.testing.assert_allclose(n, fd, atol=1e-8)
+    mesh = ngs.Mesh(ngs.unit_square.GenerateMesh(maxh=0.5))
+    gcf = skull.gap(ngs.CF((ngs.x * 2 - 1, ngs.y * 1.2)))
+    for px, py in [(0.1, 0.7), (0.5, 0.8), (0.9, 0.3), (0.45, 0.95)]:
+        X = np.array([[px * 2 - 1, py * 1.2]])
+        assert gcf(mesh(px, py)) == pytest.approx(skull.gap_numpy(X)[0], abs=1e-12)
+
+
+def test_crossing_is_the_reach_beyond_the_arc() -> None:
+    skull = SkullArc2D(R=1.0, beta_deg=60, center_deg=90)
+    over_skull = 1.03 * np.array([[math.cos(math.radians(50)), math.sin(math.radians(50))]])
+    over_opening = 1.2 * np.array([[0.0, 1.0]])
+    inside = 0.9 * np.array([[1.0, 0.0]])
+    assert skull.crossing(np.vstack([over_opening, inside])) == 0.0
+    assert skull.crossing(np.vstack([over_skull, over_opening])) == pytest.approx(0.03)
+
+
+def test_paper_problem_has_no_obstacle_on_the_opening() -> None:
+    """No-slip: the arc clamped, nothing else; sliding: contact on the skull arc only."""
+    noslip = hemidisk_problem(HemidiskCase(contact="noslip", mesh_size=0.3))
+    assert noslip.clamped == "base|skull" and noslip.contacts == []
+    assert noslip.traction_free_boundaries() == ["opening"]
+    sliding = hemidisk_problem(HemidiskCase(contact="sliding", mesh_size=0.3))
+    assert [c.boundary for c in sliding.contacts] == ["skull"]
+    assert isinstance(sliding.contacts[0].obstacle, SkullArc2D)
+    assert sliding.traction_free_boundaries() == ["opening"]
+
+
+def test_noslip_arc_points_are_fixed(noslip) -> None:
+    case, problem, form, sol = noslip
+    vs = _arc_vertices(form.mesh, "skull")
+    X = np.array([form.mesh.vertices[int(v)].point for v in vs])
+    assert np.abs(_deformed(form, vs) - X).max() < 1e-14
+    assert case.skull_arc.crossing(_deformed(form, _arc_vertices(form.mesh, "opening"))) < 1e-12
+
+
+def _tangential_virtual_work(form, weight) -> tuple[float, float]:
+    """Virtual work of the internal forces ``R_int(u)`` on a field tangential to the
+    deformed arc, ``phi(X) (-y, x)``, and on a radial one, ``phi(X) x / |x|``, with ``phi``
+    a bump that vanishes at the base and away from the arc's middle part."""
+    R_int = form.gfu.vec.CreateVector()
+    form.a.Apply(form.gfu.vec, R_int)
+    X = ngs.CF((ngs.x, ngs.y))
+    x = X + form.u
+    v = ngs.GridFunction(form.fes)
+    r = ngs.sqrt(x[0] ** 2 + x[1] ** 2)
+    out = []
+    for field in (weight * ngs.CF((-x[1], x[0])), weight * x / r):
+        v.vec[:] = 0
+        v.components[0].Set(field)
+        out.append(abs(ngs.InnerProduct(R_int, v.vec)))
+    return out[0], out[1]
+
+
+def test_sliding_arc_points_stay_on_the_circle_without_tangential_traction(sliding) -> None:
+    """Skull-arc vertices lie on ``r <= R`` (those pressed exactly on it); the skull's force on
+    the tissue does no work on tangential motions (frictionless), while it does on radial ones;
+    the tissue slides along the arc."""
+    case, problem, form, sol = sliding
+    vs = _arc_vertices(form.mesh, "skull")
+    x = _deformed(form, vs)
+    r = np.linalg.norm(x, axis=1)
+    assert r.max() < case.R + 1e-10
+    pc = form.point_contacts[0]
+    pressed = pc.lam[: len(pc.vertices)] > 0
+    assert pressed.sum() > 10
+    np.testing.assert_allclose(np.linalg.norm(pc.x[: len(pc.vertices)][pressed], axis=1),
+                               case.R, atol=1e-10)
+    theta = ngs.atan2(ngs.y, ngs.x)
+    # a bump on the arc between 15 and 45 degrees from the base (the skull's middle part)
+    bump = ngs.IfPos((theta - 0.26) * (0.79 - theta),
+                     ngs.sin((theta - 0.26) * math.pi / 0.53) ** 2, 0) * (ngs.x**2 + ngs.y**2) ** 4
+    tangential, radial = _tangential_virtual_work(form, bump)
+    assert radial > 0
+    assert tangential < 1e-6 * radial
+    slide = np.arctan2(x[:, 1], x[:, 0]) - np.arctan2(
+        *np.array([form.mesh.vertices[int(v)].point for v in vs])[:, ::-1].T)
+    assert np.abs(slide).max() > 1e-3
+
+
+def test_opening_is_traction_free(sliding) -> None:
+    """No force on the opening: the internal forces do no work on any motion of it."""
+    case, problem, form, sol = sliding
+    theta = ngs.atan2(ngs.y, ngs.x)
+    bump = ngs.IfPos((theta - 1.2) * (1.94 - theta), 1.0, 0) * (ngs.x**2 + ngs.y**2) ** 4
+    tangential, radial = _tangential_virtual_work(form, bump)
+    R_int = form.gfu.vec.CreateVector()
+    form.a.Apply(form.gfu.vec, R_int)
+    scale = ngs.Norm(R_int)
+    assert radial < 1e-8 * max(scale, 1.0) and tangential < 1e-8 * max(scale, 1.0)
+
+
+@pytest.mark.parametrize("fixture", ["noslip", "sliding"])
+def test_symmetric_case_is_symmetric(fixture, request) -> None:
+    case, problem, form, sol = request.getfixturevalue(fixture)
+    mesh = form.mesh
+    umax = max(np.abs(np.asarray(form.u(mesh(0.0, y)))).max() for y in (0.5, 0.9, 0.99))
+    for x, y in [(0.3, 0.5), (0.6, 0.2), (0.1, 0.9), (0.4, 0.85)]:
+        ur = np.asarray(form.u(mesh(x, y)))
+        ul = np.asarray(form.u(mesh(-x, y)))
+        np.testing.assert_allclose([ul[0], ul[1]], [-ur[0], ur[1]], atol=1e-2 * umax)
