@@ -544,7 +544,7 @@ def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None
     pressure/contact saddle point (h 0.04, corner 0.004) to the refinement tolerance; with
     MKL's defaults it left 99 perturbed pivots and fell back to LU for the whole run. (With
     the rim refinement at 0.004 the first two tangents of the second load step still miss
-    1e-6 and LU takes over: noted in docs/performance.md.)"""
+    1e-6 and LU takes over, as designed.)"""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.04,

@@ -173,7 +173,7 @@ class MixedForm:
         boundary, which fixes the image's volume). Sampled at integration points, the
         bubbles' oscillation widens the distribution of stretch and strain: on a 62k-tet
         brain it raised the 99th percentile of the principal strain from 0.139 to 0.192 and
-        its largest value from 0.33 to 0.93 (performance.md, "Twenty-seventh session")."""
+        its largest value from 0.33 to 0.93 (docs/design.md, "Elements")."""
         if self.element != "mini":
             return self.u
         if self._bubble_dofs is None:
