@@ -50,6 +50,7 @@ import time
 from pathlib import Path
 
 from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
+from brainbulge.runtime import configure as configure_runtime
 
 VARIANTS = {
     "baseline": {"element": "taylor-hood", "linear_solver": "pardiso", "compile": False},
@@ -147,6 +148,7 @@ def row(n: int, r: dict) -> str:
 
 
 def main() -> int:
+    configure_runtime()
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", type=int, nargs="+", default=[30_000, 100_000, 400_000])

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from brainbulge.runtime import configure as configure_runtime
+
 VARIANTS = {
     "gmres-simple": {"method": "gmres", "schur": "simple"},
     "gmres-mass": {"method": "gmres", "schur": "mass"},
@@ -213,6 +215,7 @@ def fmt(v) -> str:
 
 
 def main() -> None:
+    configure_runtime()
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tets", type=int, nargs="+", default=[30_000, 100_000],

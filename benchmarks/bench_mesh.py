@@ -15,6 +15,8 @@ import subprocess
 import sys
 import time
 
+from brainbulge.runtime import configure as configure_runtime
+
 
 def one(target_tets: int) -> dict:
     """Build one mesh and return its numbers."""
@@ -37,6 +39,7 @@ def one(target_tets: int) -> dict:
 
 
 def main() -> int:
+    configure_runtime()
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 400_000, 1_300_000])
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)

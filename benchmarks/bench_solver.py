@@ -17,6 +17,7 @@ import numpy as np
 from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
+from brainbulge.runtime import configure as configure_runtime
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
 A, JS = 0.2, 1.3
@@ -66,6 +67,7 @@ def run(h: float, element: str) -> dict:
 
 
 def main() -> None:
+    configure_runtime()
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--sizes", type=float, nargs="+", default=[0.3, 0.2, 0.14])
     ap.add_argument("--element", default="taylor-hood", choices=("taylor-hood", "mini"))

@@ -1,4 +1,4 @@
-"""Compare the summaries of 3D runs against a reference run (issue 6's 2 % check).
+"""Compare the summaries of 3D runs against a reference run (a 2 % check).
 
 Run ``python benchmarks/compare_runs.py --ref LABEL=DIR LABEL=DIR ...``: each ``DIR`` is a
 run folder with ``summary.json`` (a ``brainbulge brain --out DIR`` or a bench run

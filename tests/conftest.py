@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-import ngsolve as ngs
-import pytest
-from netgen.occ import Box, OCCGeometry, Rectangle, X, Y, Z
+from brainbulge.runtime import configure
+
+configure()  # the tuning of a brainbulge run (threads, MKL, heap, compiler cache), before NGSolve
+
+import ngsolve as ngs  # noqa: E402
+import pytest  # noqa: E402
+from netgen.occ import Box, OCCGeometry, Rectangle, X, Y, Z  # noqa: E402
 
 
 def unit_box_mesh(dim: int, h: float = 0.35) -> ngs.Mesh:

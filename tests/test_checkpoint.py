@@ -13,7 +13,7 @@ CASE = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="sliding", mesh_siz
 
 
 class Stop(Exception):
-    """Stands for the end of a session (a kill) in the middle of a load step."""
+    """Stands for the end of a job's allotted time (a kill) in the middle of a load step."""
 
 
 def _solver(path, key: str = "case A", stop_above: float | None = None) -> NewtonSolver:

@@ -1,4 +1,4 @@
-"""``benchmarks/compare_runs.py``: the reference comparison of issue 6."""
+"""``benchmarks/compare_runs.py``: the comparison of runs against a reference."""
 
 from __future__ import annotations
 

@@ -12,6 +12,8 @@ import pytest
 from brainbulge.solver.compile_cache import find_ccache
 
 COMPILE = """
+from brainbulge.runtime import configure
+configure()
 import ngsolve as ngs
 from netgen.geom2d import unit_square
 from brainbulge.solver.mixed import _compiled

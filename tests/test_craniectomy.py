@@ -1,4 +1,4 @@
-"""The 3D craniectomy end to end (MODEL.md section 6, issue checks).
+"""The 3D craniectomy end to end (MODEL.md section 6).
 
 A mirror-symmetric synthetic brain (an ellipsoid with a 7 mm gray rind around white matter,
 on an unrotated grid, mid-sagittal plane x = 0) with the symmetric bifrontal flap:
@@ -83,7 +83,7 @@ def test_midline_shift_sign_and_symmetry(shifts) -> None:
 def test_contact_and_constraint(shifts) -> None:
     for s in shifts.values():
         assert s["converged"] and s["swelling_reached"] == pytest.approx(1.1)
-        assert s["max_penetration_mm"] < 1e-3  # issue: below 0.01 mm
+        assert s["max_penetration_mm"] < 1e-3  # required: below 0.01 mm
         # the added volume leaves through the flap: bulge ~ swelling volume
         assert 0.5 * s["swelling_volume_ml"] < s["bulge_volume_ml"] < 1.1 * s["swelling_volume_ml"]
         assert abs(s["integral_J_minus_Js"]) < 1e-6 * s["brain_volume_ml"] * 1000

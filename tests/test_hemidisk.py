@@ -1,4 +1,4 @@
-"""The 2D hemidisk (MODEL.md sections 4-5, issue 3): physics that must hold."""
+"""The 2D hemidisk (MODEL.md sections 4-5): physics that must hold."""
 
 from __future__ import annotations
 

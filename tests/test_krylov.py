@@ -128,7 +128,6 @@ def test_taylor_hood_two_level_cycle_matches_direct_solve(swollen_taylor_hood) -
     x = solver.solve(K, r)
     x_direct = _direct(K, r)
     assert np.linalg.norm(x - x_direct) <= 1e-6 * np.linalg.norm(x_direct)
-    assert len(solver._amg_u.ml.levels) >= 2
     assert solver.stats.iterations[-1] <= 100  # 50 here
 
 
@@ -168,7 +167,9 @@ def test_matches_direct_solve(swollen, method: str, schur: str) -> None:
     x_direct = _direct(K, r)
     assert np.linalg.norm(x - x_direct) <= 1e-6 * np.linalg.norm(x_direct)
     assert solver.stats.residuals[-1] <= 1e-10
-    assert len(solver._amg_u.ml.levels) >= 2
+    # an effective preconditioner (AMG hierarchies, not a single level): 35 / 54 / 100 here
+    assert solver.stats.iterations[-1] <= {"simple": 60, "mass": 90}[schur] * (
+        2 if method == "minres" else 1)
 
 
 def test_minres_refuses_an_indefinite_preconditioner(swollen) -> None:
@@ -544,7 +545,7 @@ def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None
     pressure/contact saddle point (h 0.04, corner 0.004) to the refinement tolerance; with
     MKL's defaults it left 99 perturbed pivots and fell back to LU for the whole run. (With
     the rim refinement at 0.004 the first two tangents of the second load step still miss
-    1e-6 and LU takes over: noted in docs/performance.md.)"""
+    1e-6 and LU takes over, as designed.)"""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.04,

@@ -1,5 +1,5 @@
 """Rezoning (2D): a new reference mesh through the current deformation, and load stepping
-that exchanges meshes (issue 3: tissue sliding around the skull's cut edge)."""
+that exchanges meshes (tissue sliding around the skull's cut edge)."""
 
 from __future__ import annotations
 

@@ -9,7 +9,8 @@ a 69M-double array (0.55 GB) into a new array took 1.7-5.5 s, into a touched buf
 puts blocks up to 1 GiB on the heap, ``mallopt(M_TRIM_THRESHOLD, 2 GiB)`` keeps up to 2 GiB
 of freed heap mapped, so a new array of a size seen before reuses touched pages.
 
-On by default when brainbulge is imported (``BRAINBULGE_KEEP_HEAP=0`` switches it off). At
+Applied by :func:`brainbulge.runtime.configure` (the command line, study workers and the
+benchmarks call it; ``BRAINBULGE_KEEP_HEAP=0`` switches it off), never at import. At
 1.54M tets, with GMRES keeping only its basis: solve 853 s against 1,145 s, peak 10,784
 against 10,421 MiB (docs/performance.md). With GMRES's preconditioned basis still kept it
 had raised the peak to 12,535 MiB.
@@ -36,9 +37,6 @@ MMAP_THRESHOLD = 1 << 30
 #: Freed memory at the top of the heap kept mapped up to this size (bytes; ``mallopt``
 #: takes a C int).
 TRIM_THRESHOLD = (1 << 31) - 1
-
-#: Environment variable that switches this off at import (``BRAINBULGE_KEEP_HEAP=0``).
-OPT_OUT = "BRAINBULGE_KEEP_HEAP"
 
 
 def _libc():

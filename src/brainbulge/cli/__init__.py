@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge import __version__
-from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.errors import BrainbulgeError
+from brainbulge.runtime import configure as configure_runtime
 
 log = logging.getLogger("brainbulge")
 
@@ -32,6 +33,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    configure_runtime()  # threads, MKL, heap, compiler cache: before NGSolve loads
     out = getattr(args, "out", None)
     try:
         return int(args.func(args) or 0)
@@ -119,16 +121,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
-    from brainbulge.cli import brain, demo, hemidisk, reproduce, run, study
+    from brainbulge.cli import brain, demo, hemidisk, mesh, reproduce, run, study
 
-    for module in (hemidisk, brain, study, demo, reproduce, run):
+    for module in (hemidisk, brain, study, demo, reproduce, run, mesh):
         module.add_parser(sub)
-    try:  # the MRI geometry command, when its module is present
-        from brainbulge.cli import mesh
-    except ImportError:  # pragma: no cover
-        pass
-    else:
-        mesh.add_parser(sub)
     return parser
 
 
@@ -154,8 +150,3 @@ def add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument(
         "--overwrite", action="store_true", help="replace an existing brainbulge output folder"
     )
-
-
-def require(cond: bool, message: str) -> None:
-    if not cond:
-        raise InputError(message)

@@ -22,11 +22,6 @@ def deformation_gradient(u: ngs.CoefficientFunction, dim: int) -> ngs.Coefficien
     return ngs.CF((1 + G[0, 0], G[0, 1], 0, G[1, 0], 1 + G[1, 1], 0, 0, 0, 1), dims=(3, 3))
 
 
-def jacobian(F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
-    """Volume ratio ``J = det F`` [-]."""
-    return ngs.Det(F)
-
-
 def isochoric_invariants(
     F: ngs.CoefficientFunction,
 ) -> tuple[ngs.CoefficientFunction, ngs.CoefficientFunction, ngs.CoefficientFunction]:

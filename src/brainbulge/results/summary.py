@@ -162,7 +162,7 @@ def solution_summary(
     tissue: str | None = None,
     fibres: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, object]:
-    """The summary of MODEL.md section 3 / issue keys for any converged or partial solution.
+    """The summary of MODEL.md section 3 keys for any converged or partial solution.
 
     ``max_*``/``min_*`` leave out points within ``edge_exclusion`` of ``singular_points`` and,
     when given, points where ``near_singular(X)`` is true (e.g. a band around a 3D flap rim).

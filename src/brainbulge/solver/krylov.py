@@ -33,7 +33,7 @@ failed solve, or on request (``refresh()``). Every solve checks the true residua
 
 Both Krylov methods are written here rather than taken from SciPy: SciPy's ``minres`` stops
 on its preconditioned residual estimate (it reported success at a true relative residual of
-0.2 in issue 6) and its ``gmres`` preconditions from the left, so it too stops on the
+0.2 on the brain's tangent) and its ``gmres`` preconditions from the left, so it too stops on the
 preconditioned residual. Here GMRES is right-preconditioned (it minimises the true residual)
 and MINRES restarts from the true defect until the true residual meets the tolerance.
 """

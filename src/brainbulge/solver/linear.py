@@ -1,7 +1,7 @@
 """Linear solves behind one small interface.
 
 NGSolve assembles; its own sparse direct solvers were measured 2-3x slower than MKL PARDISO
-(issue 2), so the tangent is exported to SciPy CSR and factorised by ``pypardiso``. An
+on the hemidisk, so the tangent is exported to SciPy CSR and factorised by ``pypardiso``. An
 iterative block-preconditioned solver can be added behind the same interface.
 """
 

@@ -32,7 +32,6 @@ from brainbulge.errors import InputError
 from brainbulge.materials.kinematics import deformation_gradient
 from brainbulge.materials.mooney_rivlin import MooneyRivlin, mooney_rivlin_psi
 from brainbulge.model.problem import Problem
-from brainbulge.solver.compile_cache import use_compiler_cache
 from brainbulge.solver.point_contact import PointContact
 
 log = logging.getLogger(__name__)
@@ -173,7 +172,7 @@ class MixedForm:
         boundary, which fixes the image's volume). Sampled at integration points, the
         bubbles' oscillation widens the distribution of stretch and strain: on a 62k-tet
         brain it raised the 99th percentile of the principal strain from 0.139 to 0.192 and
-        its largest value from 0.33 to 0.93 (performance.md, "Twenty-seventh session")."""
+        its largest value from 0.33 to 0.93 (docs/design.md, "Elements")."""
         if self.element != "mini":
             return self.u
         if self._bubble_dofs is None:
@@ -314,10 +313,10 @@ def _compiled(W: ngs.CoefficientFunction, native: bool) -> ngs.CoefficientFuncti
     """``W`` compiled to NGSolve's expression code; with ``native`` to machine code by the
     C++ compiler (a one-off ~10 s that makes 3D assembly ~3.5x faster: 2.9 s -> 0.8 s per
     tangent on a 21k-tet brain), falling back to the expression code without a compiler.
-    The compiler runs through ``ccache`` (:mod:`brainbulge.solver.compile_cache`): the same
-    energy compiled again, by another scenario or run, is a cache hit."""
+    After :func:`brainbulge.runtime.configure` (the command line calls it) the compiler runs
+    through ``ccache`` (:mod:`brainbulge.solver.compile_cache`): the same energy compiled
+    again, by another scenario or run, is a cache hit."""
     if native:
-        use_compiler_cache()
         try:
             return W.Compile(realcompile=True, wait=True)
         except Exception as exc:  # noqa: BLE001 - NGSolve raises its own types; keep running

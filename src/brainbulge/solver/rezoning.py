@@ -11,7 +11,7 @@ not the problem. The carried-over state is first equilibrated at the same load; 
 remeshing) fails, the old mesh keeps its converged state and the ramp goes on there without
 rezoning. That old mesh may itself be a rezoned one, so a run can end earlier than the plain
 ramp on the first mesh would: sliding alpha 80 / beta 30 reaches load 0.62 with rezoning and
-0.77 without it (docs/design.md, "Twenty-seventh session").
+0.77 without it (docs/known-limits.md).
 """
 
 from __future__ import annotations

@@ -209,7 +209,7 @@ class PatternProject:
         self._dofs_ptr = np.zeros(0, dtype=np.int64)
         self._plan: list[tuple[np.ndarray, ...]] | None = None
         self._add = PatternAdd()
-        self.plans = 0  # how many active-set plans were made (a test's handle)
+        self.plans = 0  # how many active-set plans were made (0: SciPy's products)
 
     def __call__(self, K: sp.spmatrix, N: sp.spmatrix, d: float) -> sp.csr_matrix:
         K = canonical(K)
@@ -224,7 +224,7 @@ class PatternProject:
         if self._perm is not None and not same_set:
             self._plan = _projection_plan(K, Nc, self._perm)
             self._dofs, self._dofs_ptr = Nc.indices.copy(), Nc.indptr.copy()
-            self.plans += 1
+            self.plans += self._plan is not None
         if self._perm is None or self._plan is None:
             return self._scipy(K, Nc, d)
         data = K.data.copy()

@@ -202,7 +202,7 @@ def brain_summary(
             tissue=PARENCHYMA, fibres=fibres,
         ),
     }
-    # the name for the CSF strain (None when the mesh has no CSF)
+    # the report's name for the CSF strain (None when the mesh has no CSF)
     out["csf_max_principal_strain"] = out.get("max_csf_principal_strain")
     out["edge_exclusion_mm"] = band
     out.pop("edge_exclusion", None)

@@ -172,6 +172,15 @@ def _execute(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[st
         return {"ok": False, "error": _one_line(exc), "traceback": traceback.format_exc()}
 
 
+def _execute_on_worker(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[str, Any]:
+    """`_execute` in a worker process, after the process-wide tuning of a run
+    (:func:`brainbulge.runtime.configure`: the heap is per process)."""
+    from brainbulge.runtime import configure
+
+    configure()
+    return _execute(task, scenario, scenario_dir)
+
+
 def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Check names (present, filesystem-safe, unique even ignoring case, not reserved) and that
     each scenario is JSON-able; return the scenarios as JSON values. Raises `InputError`."""
@@ -467,7 +476,7 @@ def _run_distributed(
         futures = []
         for i in pending:
             future = client.submit(
-                _execute,
+                _execute_on_worker,
                 task,
                 dict(scenarios[i]),
                 str(study.scenario_dir(i)),
