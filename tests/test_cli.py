@@ -105,7 +105,9 @@ BAD = [
     (["brain", "--tets", "100000000"], "tets"),
     (["brain", "--swelling", "0"], "--help"),
     # mesh inputs
-    (["mesh", "--tets", "5000"], "[10000, 5e+06]"),
+    (["mesh", "--tets", "5000"], "below 25,000"),
+    (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
+    (["brain", "--tets", "10000"], "give --tets 25000 or more"),
     (["mesh", "--tets", "100000000"], "--tets"),
     (["mesh", "--refine", "7"], "--refine"),
     (["mesh", "--label-map", "m.json"], "--labels"),

@@ -28,9 +28,12 @@ SWELLING = (0.5, 2.0)
 HEMIDISK_EDGE_EXCLUSION = (0.0, 0.2)
 #: initial load steps
 STEPS = (1, 1000)
-#: tets of a brain mesh: fewer than 10,000 Netgen cannot resolve the envelope (it retries
-#: for minutes); more than 5 million needs more memory than a workstation has
-MESH_TETS = (10_000, 5_000_000)
+#: tets of a brain mesh: more than 5 million need more memory than a workstation has
+MESH_TETS = (1_000, 5_000_000)
+#: the coarsest mesh Netgen makes of the ICBM152 template: below ~25,000 target tets it
+#: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
+#: finish in 5 minutes)
+TEMPLATE_TETS_MIN = 25_000
 #: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
 FLAP_CENTRE_MM = 150.0
 #: Dask scheduler addresses: ``[protocol://]host:port``
@@ -154,12 +157,20 @@ def brain_npz(path: str | Path, what: str = "--mesh") -> None:
     if not p.is_file():
         raise InputError(f"{what} {path}: no such file; build one with `brainbulge mesh --out "
                          "DIR` and pass DIR/brain.npz")
+    st = p.stat()
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
+    if key in _READABLE:  # a study's scenarios share one mesh
+        return
     try:
         load_brain_mesh(p)
     except Exception:  # noqa: BLE001 - truncated, foreign, text: all the same to the user
         raise InputError(f"{what} {path} is not a brain.npz written by `brainbulge mesh` "
                          "(unreadable or other arrays); build one with `brainbulge mesh "
                          "--out DIR` and pass DIR/brain.npz") from None
+    _READABLE.add(key)
+
+
+_READABLE: set[tuple[str, int, int]] = set()
 
 
 def flap_centre(centre: Any) -> None:
@@ -181,6 +192,10 @@ def brain_case(config: dict[str, Any]) -> Any:
     case = case_from_dict(config)
     number("steps", case.steps, *STEPS, integer=True)
     flap_centre(case.flap_centre_mm)
+    if case.mesh is None:
+        mesh_tets(case.tets, case.refine, template=case.labels is None)
+        if case.coarse_tets is not None:
+            mesh_tets(case.coarse_tets, 0, template=case.labels is None)
     if case.mesh is not None:
         brain_npz(case.mesh)
     if case.coarse_mesh is not None:
@@ -188,11 +203,17 @@ def brain_case(config: dict[str, Any]) -> Any:
     return case
 
 
-def mesh_tets(tets: Any, refine: int) -> None:
+def mesh_tets(tets: Any, refine: Any, template: bool) -> None:
+    """A brain mesh of about ``tets`` tets made at ``tets / 8**refine`` and refined; of the
+    ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement."""
     number("--refine", refine, 0, 3, integer=True)
     number("--tets", tets, *MESH_TETS, integer=True,
-           hint="fewer tets cannot resolve the brain, more need more memory than a "
-           "workstation has")
+           hint="more need more memory than a workstation has")
+    if template and tets / 8**refine < TEMPLATE_TETS_MIN:
+        raise InputError(
+            f"--tets {tets}" + (f" / 8^{refine}" if refine else "") + f" is below "
+            f"{TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template that coarse (it "
+            f"retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} or more")
 
 
 # --------------------------------------------------------------------------- study

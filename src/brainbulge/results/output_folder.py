@@ -162,6 +162,10 @@ def _differences(stored: Any, new: Any, where: str = "") -> list[str]:
     return [] if stored == new else [where or "configuration"]
 
 
+def _names(config: dict[str, Any]) -> list[str]:
+    return [str(s.get("name")) for s in config.get("scenarios") or [] if isinstance(s, dict)]
+
+
 def _check_same_run(path: Path, config: dict[str, Any] | None) -> None:
     """On resume: the folder's ``run.toml`` must describe the same command and options."""
     toml = path / "run.toml"
@@ -180,6 +184,8 @@ def _check_same_run(path: Path, config: dict[str, Any] | None) -> None:
             new.get("scenarios") or []):
         detail = (f"with {len(stored['scenarios'])} scenarios, not "
                   f"{len(new.get('scenarios') or [])}")
+    elif _names(stored) != _names(new):
+        detail = f"with other scenarios ({_listing(_names(stored))})"
     else:
         detail = f"with other options ({_listing(_differences(stored, new))})"
     raise InputError(
