@@ -108,7 +108,7 @@ BAD = [
     (["mesh", "--tets", "5000"], "below 25,000"),
     (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
     (["brain", "--tets", "10000"], "give --tets 25000 or more"),
-    (["mesh", "--tets", "100000000"], "--tets"),
+    (["mesh", "--tets", "100000000"], "[1,000, 5,000,000]"),
     (["mesh", "--refine", "7"], "--refine"),
     (["mesh", "--label-map", "m.json"], "--labels"),
     (["mesh", "--flap", "custom"], "flap-centre"),

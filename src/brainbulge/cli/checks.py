@@ -50,9 +50,9 @@ def number(name: str, value: Any, lo: float, hi: float, unit: str = "",
     if ok and integer:
         ok = isinstance(value, int)
     if not (ok and math.isfinite(value) and lo <= value <= hi):
-        kind = "a whole number" if integer else "a number"
-        raise InputError(f"{name} = {value!r} must be {kind} in [{lo:g}, {hi:g}]{unit}"
-                         + (f" ({hint})" if hint else ""))
+        kind, fmt = ("a whole number", "{:,.0f}") if integer else ("a number", "{:g}")
+        raise InputError(f"{name} = {value!r} must be {kind} in [{fmt.format(lo)}, "
+                         f"{fmt.format(hi)}]{unit}" + (f" ({hint})" if hint else ""))
 
 
 def _describe(tp: Any) -> str:
@@ -207,8 +207,7 @@ def mesh_tets(tets: Any, refine: Any, template: bool) -> None:
     """A brain mesh of about ``tets`` tets made at ``tets / 8**refine`` and refined; of the
     ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement."""
     number("--refine", refine, 0, 3, integer=True)
-    number("--tets", tets, *MESH_TETS, integer=True,
-           hint="more need more memory than a workstation has")
+    number("--tets", tets, *MESH_TETS, integer=True)
     if template and tets / 8**refine < TEMPLATE_TETS_MIN:
         raise InputError(
             f"--tets {tets}" + (f" / 8^{refine}" if refine else "") + f" is below "

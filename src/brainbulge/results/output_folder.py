@@ -241,8 +241,8 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
     if foreign:
         raise InputError(
             f"output folder {path} holds {len(foreign)} file(s) brainbulge did not write "
-            f"({_listing(foreign)}); --overwrite never deletes those: move them away or "
-            "choose another --out"
+            f"({_listing(foreign)}; files of a killed run are not listed either); --overwrite "
+            "never deletes those: move them away or choose another --out"
         )
     return "clear"
 
