@@ -121,6 +121,8 @@ BAD = [
     (["study", "hemidisk-disk", "--mesh-size", "1e-6"], "mesh size"),
     (["study", "craniectomy", "--mesh", "{text_file}"], "not a brain.npz"),
     (["study", "hemidisk-sector", "--workers", "1000"], "workers"),
+    (["demo", "--scheduler", "http//x"], "scheduler"),
+    (["demo", "--workers", "0"], "workers"),
     (["study", "hemidisk-sector", "--out", "{run}"], "--overwrite"),
     (["study", "hemidisk-disk", "--out", "{study}"], "'hemidisk-sector'"),
     (["study", "hemidisk-sector", "--alphas", "20", "--out", "{study}"], "16 scenarios, not 8"),

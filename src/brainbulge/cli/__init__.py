@@ -174,7 +174,7 @@ def _mark(status: str, message: str) -> None:
     try:
         mark_status(_RUN.folder.path, status, message)
     except OSError as exc:  # e.g. the disk is full
-        log.warning("could not record the status in %s: %s", _RUN.folder.path,
+        log.info("could not record the status in %s: %s", _RUN.folder.path,
                     exc.strerror or exc)
 
 

@@ -414,7 +414,7 @@ class OutputFolder:
         try:
             self.record_files()
         except OSError as exc:  # e.g. the disk is full: the lock still goes
-            log.warning("could not update the file list in %s: %s", self.path / "run.json",
+            log.info("could not update the file list in %s: %s", self.path / "run.json",
                         exc.strerror or exc)
         if self.lock is not None:
             self.lock.unlink(missing_ok=True)
