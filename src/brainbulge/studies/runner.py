@@ -97,8 +97,7 @@ WORKER_ENV = {
     "NUMBA_NUM_THREADS": "1",
 }
 
-#: How long to try to reach an existing Dask scheduler before giving up.
-CONNECT_TIMEOUT = "10s"
+CONNECT_TIMEOUT = "10s"  #: how long to try to reach an existing Dask scheduler
 
 SUMMARY_FILE = "summary.json"
 ERROR_FILE = "error.json"
