@@ -3,11 +3,13 @@ the README's Python example runs."""
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from brainbulge.cli import main
@@ -47,20 +49,196 @@ BAD = [
     (["brain", "--fibres", "missing_V1.nii.gz"], "fibre image"),
     (["study", "craniectomy", "--tets", "10"], "tets"),
     (["study", "craniectomy", "--swelling", "0.1"], "swelling"),
+    # options checked before --out is touched (a finished run given as --out stays as it is)
+    (["hemidisk", "--steps", "0", "--out", "{run}", "--overwrite"], "steps"),
+    (["hemidisk", "--mesh-size", "0", "--out", "{run}", "--overwrite"], "mesh size"),
+    (["hemidisk", "--material", "jelly", "--out", "{run}", "--overwrite"], "preset"),
+    (["hemidisk", "--skull-edge-radius", "0.5", "--out", "{run}", "--overwrite"], "edge radius"),
+    (["hemidisk", "--alpha", "200", "--out", "{run}"], "alpha"),
+    (["hemidisk", "--out", "{run}"], "--overwrite"),
+    (["hemidisk", "--out", "{user_file}"], "is a file"),
+    (["hemidisk", "--out", "{tmp}", "--overwrite"], "holds the current folder"),
+    (["hemidisk", "--out", ".", "--overwrite"], "current folder"),
+    (["hemidisk", "--out", "{tmp}/..", "--overwrite"], "current folder"),
+    (["hemidisk", "--out", ""], "--out is empty"),
+    (["hemidisk", "--out", "{run_with_notes}", "--overwrite"], "notes.txt"),
+    (["hemidisk", "--out", "{old_run}", "--overwrite"], "no list of the files"),
+    (["mesh", "--tets", "20000", "--out", "{run}", "--overwrite", "--refine", "9"], "--refine"),
+    # hemidisk ranges: a refusal with the range instead of hours of meshing or a crash
+    (["hemidisk", "--mesh-size", "1e-6"], "[0.005, 1]"),
+    (["hemidisk", "--mesh-size", "nan"], "mesh size"),
+    (["hemidisk", "--corner-mesh-size", "1e-9"], "corner mesh size"),
+    (["hemidisk", "--rim-mesh-size", "2"], "rim mesh size"),
+    (["hemidisk", "--edge-exclusion", "5"], "edge exclusion"),
+    (["hemidisk", "--edge-exclusion", "nan"], "edge exclusion"),
+    (["hemidisk", "--radius", "1e-12"], "radius"),
+    (["hemidisk", "--disk", "0", "0.5", "0"], "disk radius"),
+    (["hemidisk", "--disk", "0", "nan", "0.1"], "disk"),
+    (["hemidisk", "--swelling", "3"], "[0.5, 2]"),
+    (["hemidisk", "--steps", "100000"], "steps"),
+    (["hemidisk", "--opening-center", "nan"], "opening"),
+    (["hemidisk", "--alpha", "x"], "--help"),
+    # TOML files: wrong types and values are input errors (exit 2), not internal ones
+    (["run", "{toml:alpha = 'eighty'}"], "alpha = 'eighty' must be a number"),
+    (["run", "{toml:R = 1e-12}"], "radius"),
+    (["run", "{toml:steps = 2.5}"], "whole number"),
+    (["run", "{toml:contact = 3}"], "text"),
+    (["run", "{toml:rezone = 'yes'}"], "true or false"),
+    (["run", "{toml:disk = [0.0, 0.5]}"], "disk"),
+    (["run", "{toml:mesh_size = '0.1'}"], "mesh_size"),
+    (["run", "{toml:extra = 5}"], "table"),
+    (["run", "{toml:banana = 1}"], "banana"),
+    (["run", "{brain_toml:steps = 'four'}"], "steps"),
+    (["run", "{brain_toml:mesh = '{text_file}'}"], "not a brain.npz"),
+    (["run", "{tmp}/missing.toml"], "cannot read"),
+    # brain inputs
+    (["brain", "--mesh", "{text_file}"], "not a brain.npz"),
+    (["brain", "--mesh", "{truncated_npz}"], "not a brain.npz"),
+    (["brain", "--mesh", "{foreign_npz}"], "not a brain.npz"),
+    (["brain", "--mesh", "{empty_file}"], "not a brain.npz"),
+    (["brain", "--mesh", "{tmp}"], "no such file"),
+    (["brain", "--flap", "custom", "--flap-centre", "1000", "1000", "1000"], "near the skull"),
+    (["brain", "--label-map", "freesurfer"], "--labels"),
+    (["brain", "--edge-exclusion", "nan"], "edge exclusion"),
+    (["brain", "--skull-edge-radius", "nan"], "edge radius"),
+    (["brain", "--steps", "5000"], "steps"),
+    (["brain", "--tets", "100000000"], "tets"),
+    (["brain", "--swelling", "0"], "--help"),
+    # mesh inputs
+    (["mesh", "--tets", "5000"], "below 25,000"),
+    (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
+    (["brain", "--tets", "10000"], "give --tets 25000 or more"),
+    (["mesh", "--tets", "100000000"], "[1,000, 5,000,000]"),
+    (["mesh", "--refine", "7"], "--refine"),
+    (["mesh", "--label-map", "m.json"], "--labels"),
+    (["mesh", "--flap", "custom"], "flap-centre"),
+    (["mesh", "--flap", "custom", "--flap-centre", "1000", "0", "0"], "near the skull"),
+    (["mesh", "--csf-layer", "nan"], "csf-layer"),
+    (["mesh", "--labels", "{text_file}"], "label image"),
+    # studies: every scenario checked before anything starts (exit 2, not 4)
+    (["study", "hemidisk-sector", "--scheduler", "not a url"], "scheduler"),
+    (["study", "hemidisk-sector", "--steps", "0"], "steps"),
+    (["study", "hemidisk-disk", "--mesh-size", "1e-6"], "mesh size"),
+    (["study", "craniectomy", "--mesh", "{text_file}"], "not a brain.npz"),
+    (["study", "hemidisk-sector", "--workers", "1000"], "workers"),
+    (["demo", "--scheduler", "http//x"], "scheduler"),
+    (["demo", "--workers", "0"], "workers"),
+    (["study", "hemidisk-sector", "--out", "{run}"], "--overwrite"),
+    (["study", "hemidisk-disk", "--out", "{study}"], "'hemidisk-sector'"),
+    (["study", "hemidisk-sector", "--alphas", "20", "--out", "{study}"], "16 scenarios, not 8"),
 ]
+
+#: exit code of each case: 2 (bad input) unless listed
+EXIT = {"infeasible": 3}
+
+
+def _finished_run(folder: Path, command: str = "hemidisk", manifest: bool = True) -> None:
+    """A finished brainbulge run, as the CLI leaves it (record, results, manifest)."""
+    from brainbulge.results.output_folder import claim_output_dir
+    from brainbulge.results.run_record import mark_status, write_run_record
+
+    claimed = claim_output_dir(folder, overwrite=False)
+    write_run_record(folder, {"command": command, command: {"alpha": 80.0}}, ["brainbulge"])
+    (folder / "summary.json").write_text('{"max_displacement": 0.17}\n')
+    (folder / "fields.vtu").write_bytes(bytes(range(256)))
+    mark_status(folder, "complete")
+    claimed.release()
+    if not manifest:  # written by a brainbulge without manifests
+        record = json.loads((folder / "run.json").read_text())
+        del record["files"]
+        (folder / "run.json").write_text(json.dumps(record))
+
+
+def _finished_study(folder: Path) -> None:
+    from brainbulge.cli import build_parser
+    from brainbulge.cli.study import scenarios_for
+    from brainbulge.results.output_folder import claim_output_dir
+    from brainbulge.results.run_record import mark_status, write_run_record
+
+    args = build_parser().parse_args(["study", "hemidisk-sector", "--alphas", "20", "40"])
+    scenarios = scenarios_for("hemidisk-sector", args)
+    claimed = claim_output_dir(folder, overwrite=False)
+    write_run_record(folder, {"command": "study", "study": "hemidisk-sector",
+                              "scenarios": scenarios}, ["brainbulge"])
+    (folder / "study.json").write_text('{"n_scenarios": 16}\n')
+    (folder / scenarios[0]["name"]).mkdir()
+    (folder / scenarios[0]["name"] / "summary.json").write_text('{"complete": true}\n')
+    mark_status(folder, "complete")
+    claimed.release()
+
+
+@pytest.fixture
+def workspace(tmp_path, monkeypatch):
+    """A user's project folder: a finished run, a finished study, the user's own files."""
+    _finished_run(tmp_path / "run")
+    _finished_run(tmp_path / "run_with_notes")
+    (tmp_path / "run_with_notes" / "notes.txt").write_text("my notes")
+    _finished_run(tmp_path / "old_run", manifest=False)
+    _finished_study(tmp_path / "study")
+    (tmp_path / "thesis.tex").write_text("\\section{Results}\n")
+    (tmp_path / "text.npz").write_text("nodes, tets\n1 2 3\n")
+    (tmp_path / "empty.npz").write_bytes(b"")
+    np.savez(tmp_path / "foreign.npz", a=np.arange(3))
+    np.savez(tmp_path / "whole.npz", nodes_mm=np.zeros((100, 3)), tets=np.zeros((100, 4)))
+    data = (tmp_path / "whole.npz").read_bytes()
+    (tmp_path / "truncated.npz").write_bytes(data[: len(data) // 2])
+    (tmp_path / "whole.npz").unlink()
+    work = tmp_path / "work"  # the current folder: inside the project
+    work.mkdir()
+    (work / "run.toml").write_text("command = 'hemidisk'\n[hemidisk]\nalpha = 80.0\n")
+    monkeypatch.chdir(work)
+    return tmp_path
+
+
+def _expand(arg: str, tmp: Path) -> str:
+    names = {"{run}": "run", "{run_with_notes}": "run_with_notes", "{old_run}": "old_run",
+             "{study}": "study", "{user_file}": "thesis.tex", "{text_file}": "text.npz",
+             "{truncated_npz}": "truncated.npz", "{foreign_npz}": "foreign.npz",
+             "{empty_file}": "empty.npz"}
+    for key, name in names.items():
+        arg = arg.replace(key, str(tmp / name))
+    arg = arg.replace("{tmp}", str(tmp))
+    for kind, command in (("{toml:", "hemidisk"), ("{brain_toml:", "brain")):
+        if arg.startswith(kind):
+            path = tmp / "cfg" / f"{abs(hash(arg))}.toml"
+            path.parent.mkdir(exist_ok=True)
+            path.write_text(f"command = '{command}'\n[{command}]\n{arg[len(kind):-1]}\n")
+            arg = str(path)
+    return arg
+
+
+def _tree(root: Path) -> dict[str, bytes]:
+    return {p.relative_to(root).as_posix(): p.read_bytes()
+            for p in sorted(root.rglob("*")) if p.is_file() and "cfg" not in p.parts
+            and "new" not in p.parts}
 
 
 @pytest.mark.parametrize("argv,message", BAD, ids=[" ".join(a) for a, _ in BAD])
-def test_bad_input_table(argv, message, tmp_path, capsys) -> None:
-    out = tmp_path / "out"
-    code = main([*argv, "--out", str(out)])
+def test_bad_input_table(argv, message, workspace, capsys) -> None:
+    """One line, the right exit code, no traceback, and nothing of the user's changed."""
+    tmp = workspace
+    argv = [_expand(a, tmp) for a in argv]
+    new = tmp / "new"
+    if "--out" not in argv:
+        argv += ["--out", str(new)]
+    before = _tree(tmp)
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse: malformed values
+        code = exc.code
     err = capsys.readouterr().err.strip().splitlines()
-    assert code != 0
-    assert err and err[-1].startswith("error:") and message in err[-1], err
-    # nothing corrupt: either no folder, or a run record with a failed status
-    if out.exists():
-        assert (out / "status.json").is_file()
-        assert not (out / "summary.json").exists() or "infeasible" not in message
+    assert code == EXIT.get(message, 2), err
+    assert len(err) == 1 and err[0].startswith("error:") and message in err[0], err
+    assert "Traceback" not in err[0]
+    assert _tree(tmp) == before  # the finished runs and the user's files, byte for byte
+    assert not list(tmp.rglob(".brainbulge.lock"))
+    if new.exists():  # only a run that started (infeasible) wrote, with a true status
+        assert message == "infeasible"
+        assert json.loads((new / "status.json").read_text())["status"] == "failed"
+
+
+def test_the_table_is_large() -> None:
+    assert len(BAD) >= 60
 
 
 def test_bad_toml(tmp_path, capsys) -> None:

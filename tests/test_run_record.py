@@ -46,11 +46,17 @@ def test_prepare_refuses_non_empty(tmp_path: Path) -> None:
 def test_overwrite_clears_a_previous_run_only(tmp_path: Path) -> None:
     run = tmp_path / "run"
     prepare_output_dir(run, overwrite=False)
-    write_run_record(run, {"a": 1}, ["bb"])
     (run / "sub").mkdir()
     (run / "sub" / "old.vtu").write_text("x")
+    write_run_record(run, {"a": 1}, ["bb"], files={"sub/old.vtu"})
     assert prepare_output_dir(run, overwrite=True) == run
     assert run.is_dir() and not any(run.iterdir())
+
+    write_run_record(run, {"a": 1}, ["bb"])
+    (run / "mine.txt").write_text("a user's")  # not in the manifest: nothing is deleted
+    with pytest.raises(InputError, match=r"1 file\(s\) brainbulge did not write \(mine.txt;"):
+        prepare_output_dir(run, overwrite=True)
+    assert sorted(p.name for p in run.iterdir()) == ["mine.txt", "run.json", "run.toml"]
 
     foreign = tmp_path / "foreign"
     foreign.mkdir()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -133,7 +134,8 @@ def test_bad_scenarios_are_rejected_before_anything_runs(tmp_path: Path, scenari
     assert not out.exists()
 
 
-def test_task_by_module_path_and_progress_bar(tmp_path: Path, capsys) -> None:
+def test_task_by_module_path_and_progress_bar(tmp_path: Path, capsys, monkeypatch) -> None:
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)  # a terminal: a bar
     rows = run_study(
         [{"name": "a", "p": Path("/x"), "t": (1, 2)}],
         "brainbulge.studies.runner:echo_task",
@@ -142,6 +144,10 @@ def test_task_by_module_path_and_progress_bar(tmp_path: Path, capsys) -> None:
     )
     assert rows == [{"name": "a", "p": "/x", "t": [1, 2], "complete": True}]
     assert "1/1" in capsys.readouterr().err
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)  # a log: no bar
+    run_study([{"name": "b"}], "brainbulge.studies.runner:echo_task", tmp_path / "2",
+              scheduler="serial")
+    assert "\r" not in capsys.readouterr().err
     with pytest.raises(InputError, match="cannot import task"):
         run_study([{"name": "a"}], "brainbulge.studies.runner:nope", tmp_path, scheduler="serial")
 

@@ -1,18 +1,25 @@
 """The ``brainbulge`` command line: thin; parses, validates, calls the API.
 
-Every command writes into ``--out`` (refused if it exists and is not empty, unless
-``--overwrite``), records ``run.toml`` (the resolved configuration, which ``brainbulge run``
-accepts back), ``run.json`` (versions, command) and ``status.json``, and logs to
-``brainbulge.log``. Errors are one line on stderr with a non-zero exit code; ``--debug`` shows
-the traceback.
+Every command checks all its inputs first, then claims ``--out`` (refused if it exists and
+is not empty, unless ``--overwrite``, which deletes only files brainbulge wrote; locked while
+the run lasts), records ``run.toml`` (the resolved configuration, which ``brainbulge run``
+accepts back), ``run.json`` (versions, command, the files written) and ``status.json``, and
+logs to ``brainbulge.log``. Errors are one line on stderr with a non-zero exit code;
+``--debug`` shows the traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
+import signal
 import sys
+import threading
+import time
+import typing
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +31,32 @@ log = logging.getLogger("brainbulge")
 
 EXIT_INTERRUPTED = 130
 
+#: errno values of a write that failed for lack of space or permission (one line, exit 2)
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+_NO_WRITE = (errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (e.g. a batch system's time limit): handled as an interruption."""
+
+
+@dataclass
+class _Run:
+    """The output folder this process owns (claimed and locked by `start_run`)."""
+
+    folder: Any = None
+    log_handler: logging.Handler | None = None
+    started: float = field(default_factory=time.time)
+
+
+_RUN = _Run()
+
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``brainbulge`` console script."""
+    """Entry point of the ``brainbulge`` console script; returns the exit code (0 done, 2 bad
+    input or unusable output folder, 3 infeasible, 4 not converged / incomplete, 5 mesh
+    error, 130 interrupted; 1 only for internal errors)."""
+    global _RUN
     parser = build_parser()
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
@@ -34,40 +64,128 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 0
     configure_runtime()  # threads, MKL, heap, compiler cache: before NGSolve loads
-    out = getattr(args, "out", None)
+    _RUN = _Run()
+    previous = _on_sigterm(_raise_terminated)
     try:
         return int(args.func(args) or 0)
     except BrainbulgeError as err:
-        _mark(out, "failed" if err.exit_code != 4 else "incomplete", str(err))
+        _mark("failed" if err.exit_code != 4 else "incomplete", str(err))
         if args.debug:
             raise
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {_line(err)}", file=sys.stderr)
         return err.exit_code
-    except KeyboardInterrupt:
-        _mark(out, "incomplete", "interrupted by the user")
-        print("interrupted: results finished so far are kept in the output folder", file=sys.stderr)
+    except KeyboardInterrupt as err:
+        _end_children()
+        how = "stopped by SIGTERM" if isinstance(err, Terminated) else "interrupted by the user"
+        _mark("incomplete", how)
+        print(f"interrupted: {_kept()}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as err:
+        if err.errno not in (*_DISK_FULL, *_NO_WRITE) or args.debug:
+            return _internal(err, args.debug)
+        if _RUN.folder is not None and err.errno in _DISK_FULL:
+            _RUN.folder.drop_empty_files()
+        _mark("failed", _os_message(err))
+        print(f"error: {_os_message(err)}", file=sys.stderr)
+        return InputError.exit_code
     except Exception as err:  # an unexpected failure: still one line unless --debug
-        _mark(out, "failed", repr(err))
-        if args.debug:
-            raise
-        msg = " ".join(str(err).split()) or type(err).__name__
-        print(
-            f"error: internal error ({type(err).__name__}: {msg}); rerun with --debug and "
-            "report it",
-            file=sys.stderr,
-        )
-        return 1
+        return _internal(err, args.debug)
+    finally:
+        _on_sigterm(previous)
+        _release()
 
 
-def _mark(out: Any, status: str, message: str) -> None:
-    if out is None:
+def _internal(err: Exception, debug: bool) -> int:
+    _mark("failed", repr(err))
+    if debug:
+        raise err
+    print(f"error: internal error ({type(err).__name__}: {_line(err) or type(err).__name__}); "
+          "rerun with --debug and report it", file=sys.stderr)
+    return 1
+
+
+def _line(err: BaseException) -> str:
+    return " ".join(str(err).split())
+
+
+def _os_message(err: OSError) -> str:
+    """One line for a failed write: what, why, what to do."""
+    out = _RUN.folder.path if _RUN.folder is not None else None
+    inside = out is not None and err.filename is not None and (
+        Path(out).resolve() in Path(str(err.filename)).resolve().parents)
+    what = (f"cannot write {err.filename}" if inside else f"cannot access {err.filename}"
+            if err.filename else "cannot write the results")
+    why = (err.strerror or str(err)).rstrip(".").lower()
+    if err.errno in _DISK_FULL:
+        kept = f"; results written so far are kept in {out}" if out is not None else ""
+        return f"{what}: {why}; free some space or choose another --out{kept}"
+    return f"{what}: {why}; " + ("choose a writable --out" if inside or not err.filename
+                                 else "check that the file is readable")
+
+
+def _raise_terminated(signum: int, frame: Any) -> None:
+    raise Terminated()
+
+
+def _on_sigterm(handler: Any) -> Any:
+    """Install ``handler`` for SIGTERM (main thread only); return the previous one."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    if handler is None:
+        return None
+    return signal.signal(signal.SIGTERM, handler)
+
+
+def _end_children(grace: float = 2.0) -> None:
+    """End the child processes this command started (Netgen's mesher, Dask workers): SIGTERM,
+    then SIGKILL for those still running after ``grace`` seconds."""
+    try:
+        import psutil
+
+        children = [c for c in psutil.Process().children(recursive=True)
+                    if c.create_time() >= _RUN.started - 1.0]
+        for child in children:
+            child.terminate()
+        _, alive = psutil.wait_procs(children, timeout=grace)
+        for child in alive:
+            child.kill()
+    except Exception as exc:  # noqa: BLE001 - psutil missing or a child already gone
+        log.debug("ending child processes: %s", exc)
+
+
+def _kept() -> str:
+    """What an interruption left in the output folder, truthfully."""
+    folder = _RUN.folder
+    if folder is None:
+        return "nothing was written"
+    record = {"run.json", "run.toml", "status.json", "brainbulge.log"}
+    results = [f for f in folder.written() if f not in record]
+    if not results:
+        return f"stopped before any results were written; {folder.path} holds the run record only"
+    again = any((folder.path / n).is_file() for n in ("study.json", "restart.npz"))
+    return (f"results finished so far are kept in {folder.path}"
+            + ("; rerun the same command to resume" if again else ""))
+
+
+def _mark(status: str, message: str) -> None:
+    """Record ``status`` in the output folder, only if this process owns it."""
+    if _RUN.folder is None:
         return
     from brainbulge.results.run_record import mark_status
 
-    path = Path(out)
-    if path.is_dir() and (path / "run.json").is_file():
-        mark_status(path, status, message)
+    try:
+        mark_status(_RUN.folder.path, status, message)
+    except OSError as exc:  # e.g. the disk is full
+        log.info("could not record the status in %s: %s", _RUN.folder.path,
+                    exc.strerror or exc)
+
+
+def _release() -> None:
+    if _RUN.log_handler is not None:
+        log.removeHandler(_RUN.log_handler)
+        _RUN.log_handler.close()
+    if _RUN.folder is not None:
+        _RUN.folder.release()
 
 
 def _setup_logging(verbose: int) -> None:
@@ -78,22 +196,33 @@ def _setup_logging(verbose: int) -> None:
         h.setLevel(level)
 
 
-def add_log_file(out: Path) -> None:
+def add_log_file(out: Path) -> logging.Handler:
     """Also log (INFO and above) to ``out/brainbulge.log``."""
     handler = logging.FileHandler(Path(out) / "brainbulge.log")
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     log.addHandler(handler)
+    return handler
+
+
+def progress_bar() -> bool:
+    """Progress bars only on a terminal; logs get plain lines (``brainbulge.log``, ``-v``)."""
+    return sys.stderr.isatty()
 
 
 def start_run(args: argparse.Namespace, config: dict[str, Any], resume: bool = False) -> Path:
-    """Prepare ``--out``, write the run record, mark it running, start the log file."""
-    from brainbulge.results.run_record import mark_status, prepare_output_dir, write_run_record
+    """Claim ``--out`` (checked, created, locked; cleared only with ``--overwrite``), write the
+    run record, mark it running, start the log file. Call only after every input is checked."""
+    from brainbulge.results.output_folder import claim_output_dir
+    from brainbulge.results.run_record import mark_status, write_run_record
 
-    out = prepare_output_dir(Path(args.out), overwrite=args.overwrite, resume=resume)
-    write_run_record(out, config, None)
+    folder = claim_output_dir(args.out, overwrite=args.overwrite, resume=resume,
+                              config=config)
+    _RUN.folder = folder
+    out = folder.path
+    write_run_record(out, config, None, files=folder.previous)
     mark_status(out, "running")
-    add_log_file(out)
+    _RUN.log_handler = add_log_file(out)
     return out
 
 
@@ -105,8 +234,15 @@ def finish_run(out: Path, message: str = "") -> None:
 
 
 # --- parser ---------------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit 2) that point to ``--help``."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(2, f"error: {' '.join(message.split())}; see `{self.prog} --help`\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="brainbulge",
         description="Finite-element simulation of brain swelling and decompressive "
         "craniectomy (Weickenmeier et al., 'Bulging brains', 2017).",

@@ -14,7 +14,14 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, positive_float, start_run
+from brainbulge.cli import (
+    add_output_options,
+    finish_run,
+    positive_float,
+    progress_bar,
+    require,
+    start_run,
+)
 from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
 
 
@@ -35,8 +42,9 @@ def add_parser(sub: Any) -> None:
     src.add_argument("--tets", type=int, default=30_000,
                      help="build a mesh of about this many tets (default 30000)")
     p.add_argument("--labels", default=None, help="NIfTI label map (default: ICBM152 template)")
-    p.add_argument("--label-map", default="synthseg",
-                   help="label preset (freesurfer, aseg, synthseg, gmwmcsf) or JSON file")
+    p.add_argument("--label-map", default=None,
+                   help="label preset (freesurfer, aseg, synthseg, gmwmcsf) or JSON file of "
+                   "--labels (default synthseg)")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
                    help="scale the brain to this intracranial volume [ml]")
     p.add_argument("--flap-centre", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
@@ -78,7 +86,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "tets": args.tets,
         "mesh": args.mesh,
         "labels": args.labels,
-        "label_map": args.label_map,
+        "label_map": args.label_map or "synthseg",
         "brain_volume_ml": args.brain_volume,
         "flap_centre_mm": tuple(args.flap_centre) if args.flap_centre else None,
         "flap_diameter_mm": args.flap_diameter,
@@ -97,9 +105,12 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from brainbulge.studies.craniectomy import case_from_dict
+    from brainbulge.cli.checks import brain_case
 
-    return run_case(args, case_from_dict(config_from_args(args)))  # validated before --out
+    require(args.label_map is None or args.labels is not None or args.mesh is not None,
+            "--label-map describes the codes of --labels; give --labels too, or drop "
+            "--label-map")
+    return run_case(args, brain_case(config_from_args(args)))  # checked before --out
 
 
 def run_case(args: argparse.Namespace, case: Any) -> int:
@@ -109,7 +120,7 @@ def run_case(args: argparse.Namespace, case: Any) -> int:
     # a folder with a restart file (a run stopped mid-way) is resumed, unless --overwrite
     resume = (Path(args.out) / "restart.npz").is_file() and not args.overwrite
     out = start_run(args, config, resume=resume)
-    s = run_brain(case, out, progress=True)
+    s = run_brain(case, out, progress=progress_bar())
     finish_run(out)
     print(
         f"Js {s['swelling_reached']:.3f}: max |u| = {s['max_displacement']:.3g} mm, midline "

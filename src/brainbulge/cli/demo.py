@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
+from brainbulge.errors import InputError
 
 REPORT_KEYS = (
     "max_displacement",
@@ -56,9 +57,13 @@ def demo_plan(quick: bool) -> dict[str, Any]:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from brainbulge.cli import checks
     from brainbulge.cli.study import run_study_and_report
     from brainbulge.studies import hemidisk as hd
 
+    checks.scheduler(args.scheduler)
+    if args.workers is not None and not 1 <= args.workers <= 256:
+        raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
     plan = demo_plan(args.quick)
     out = start_run(args, {"command": "demo", "quick": args.quick, **plan})
     head = plan["headline"]

@@ -6,7 +6,7 @@ import argparse
 import dataclasses
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run
+from brainbulge.cli import add_output_options, finish_run, progress_bar, start_run
 
 
 def add_parser(sub: Any) -> None:
@@ -118,11 +118,9 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from brainbulge.studies.hemidisk import case_from_dict
+    from brainbulge.cli.checks import hemidisk_case
 
-    case = case_from_dict(config_from_args(args))  # validate before touching --out
-    case.geometry  # noqa: B018 - validates the geometry parameters
-    return run_case(args, case)
+    return run_case(args, hemidisk_case(config_from_args(args)))  # checked before --out
 
 
 def run_case(args: argparse.Namespace, case: Any) -> int:
@@ -130,7 +128,7 @@ def run_case(args: argparse.Namespace, case: Any) -> int:
 
     config = {"command": "hemidisk", "hemidisk": dataclasses.asdict(case)}
     out = start_run(args, config)
-    summary = run_hemidisk(case, out, progress=True)
+    summary = run_hemidisk(case, out, progress=progress_bar())
     finish_run(out)
     print(
         f"max |u| = {summary['max_displacement']:.4g} R, lambda_n in "

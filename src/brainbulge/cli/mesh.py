@@ -25,8 +25,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--labels", help="NIfTI label map (.nii/.nii.gz); default: ICBM152 template")
     p.add_argument(
         "--label-map",
-        default="freesurfer",
-        help="preset (freesurfer, aseg, synthseg, gmwmcsf) or JSON file "
+        default=None,
+        help="preset (freesurfer, aseg, synthseg, gmwmcsf) or JSON file of --labels "
         '{"gray": [codes], "white": [...], "csf": [...], "cerebellum": [...], '
         '"brainstem": [...]} (default freesurfer)',
     )
@@ -53,13 +53,23 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Build, save and summarise the mesh; returns the exit code."""
-    from brainbulge.cli import finish_run, start_run
+    import math
+
+    from brainbulge.cli import checks, finish_run, start_run
     from brainbulge.geometry.brain import build_brain_mesh, load_tissue_image, save_brain_mesh
 
     if args.flap == "custom" and args.flap_centre is None:
         raise InputError("--flap custom needs --flap-centre X Y Z (mm on the skull)")
-    if args.csf_layer < 0 or args.csf_layer > 10:
-        raise InputError(f"--csf-layer {args.csf_layer} mm is outside 0-10 mm")
+    if args.label_map is not None and args.labels is None:
+        raise InputError("--label-map describes the codes of --labels; give --labels too, or "
+                         "drop --label-map")
+    args.label_map = args.label_map or "freesurfer"
+    if not 0 <= args.csf_layer <= 10:
+        raise InputError(f"--csf-layer {args.csf_layer} mm must lie in [0, 10] mm")
+    if args.base_z is not None and not math.isfinite(args.base_z):
+        raise InputError(f"--base-z {args.base_z} must be a finite height [mm, world z]")
+    checks.mesh_tets(args.tets, args.refine, template=args.labels is None)
+    checks.flap_centre(args.flap_centre)
     image = load_tissue_image(args.labels, args.label_map) if args.labels else None
     config = {"command": "mesh", "mesh": {
         "labels": args.labels, "label_map": args.label_map, "tets": args.tets,

@@ -41,14 +41,12 @@ def run_command(args: argparse.Namespace) -> int:
     table = config.get(command)
     if not isinstance(table, dict):
         raise InputError(f"{args.config}: missing table [{command}] with the case's options")
+    from brainbulge.cli import checks
+
     if command == "brain":
         from brainbulge.cli.brain import run_case as run_brain_case
-        from brainbulge.studies.craniectomy import case_from_dict as brain_case
 
-        return run_brain_case(args, brain_case(table))
+        return run_brain_case(args, checks.brain_case(table))  # checked before --out
     from brainbulge.cli.hemidisk import run_case
-    from brainbulge.studies.hemidisk import case_from_dict
 
-    case = case_from_dict(table)
-    case.geometry  # noqa: B018 - validate before creating --out
-    return run_case(args, case)
+    return run_case(args, checks.hemidisk_case(table))

@@ -68,19 +68,17 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers {args.workers} must be at least 1")
+    from brainbulge.cli import checks
+
+    if args.workers is not None and not 1 <= args.workers <= 256:
+        raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
+    checks.scheduler(args.scheduler)
     scenarios = scenarios_for(args.name, args)
-    for sc in scenarios:  # validate every scenario before starting
+    for sc in scenarios:  # check every scenario before anything starts: exit 2, not 4
         if args.name == "craniectomy":
-            from brainbulge.studies.craniectomy import case_from_dict as brain_case
-
-            brain_case(sc)
-            continue
-        from brainbulge.studies.hemidisk import case_from_dict
-
-        case = case_from_dict({k: v for k, v in sc.items() if k != "name"})
-        case.geometry  # noqa: B018
+            checks.brain_case(sc)
+        else:
+            checks.hemidisk_case({k: v for k, v in sc.items() if k != "name"})
     out_path = Path(args.out)
     resume = (out_path / "study.json").is_file() and not args.overwrite
     out = start_run(

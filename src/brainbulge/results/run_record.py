@@ -12,8 +12,10 @@ A run's output folder holds, besides its results:
     ``{"status": "running" | "complete" | "incomplete" | "failed", "message", "time"}``,
     so a crashed or interrupted run is recognisable from its folder alone.
 
-All JSON/TOML files are written atomically (temporary file in the same folder, then
-``os.replace``): a reader never sees half a file, even after a crash.
+``run.json["files"]`` lists every file the run wrote (the manifest ``--overwrite`` deletes,
+see :mod:`brainbulge.results.output_folder`). All JSON/TOML files are written atomically
+(temporary file in the same folder, then ``os.replace``), readable as the user's umask
+allows: a reader never sees half a file, even after a crash.
 
 >>> import tempfile
 >>> out = prepare_output_dir(Path(tempfile.mkdtemp()) / "run1", overwrite=False)
@@ -32,7 +34,6 @@ import json
 import os
 import platform
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -47,6 +48,7 @@ import tomli_w
 
 from brainbulge import __version__
 from brainbulge.errors import InputError
+from brainbulge.results.output_folder import RUN_MARKERS, refresh_manifest
 
 __all__ = [
     "STATUSES",
@@ -77,10 +79,6 @@ RECORDED_PACKAGES = (
     "nilearn",
 )
 
-#: Files that mark a folder as written by brainbulge (what ``overwrite`` may clear).
-RUN_MARKERS = ("run.json", "run.toml", "status.json", "study.json")
-
-
 # --------------------------------------------------------------------------- atomic files
 
 
@@ -92,6 +90,7 @@ def atomic_write_text(path: Path, text: str) -> Path:
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp's 0600 would hide results from others
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
@@ -101,6 +100,19 @@ def atomic_write_text(path: Path, text: str) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where the system allows."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: set and restore at once
+    os.umask(mask)
+    return mask
 
 
 def atomic_write_json(path: Path, data: Any) -> Path:
@@ -117,53 +129,13 @@ def is_run_folder(path: Path) -> bool:
 
 
 def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Path:
-    """Create the output folder ``path`` (with parents) and return it.
+    """Check, create and (``overwrite``) clear the output folder ``path``; return it.
 
-    An existing empty folder is used as is. A non-empty one is refused unless
+    See `brainbulge.results.output_folder.prepare_output_dir` (and `claim_output_dir`, which
+    also locks the folder, for commands)."""
+    from brainbulge.results.output_folder import prepare_output_dir as prepare
 
-    * ``overwrite``: the folder is a previous brainbulge output (it holds ``run.json``,
-      ``run.toml``, ``status.json`` or ``study.json``); its contents are deleted so stale
-      results cannot mix with new ones. A non-empty folder that is *not* a brainbulge output
-      is never deleted, even with ``overwrite``.
-    * ``resume``: the folder holds a ``study.json`` (a resumable study) or a ``restart.npz``
-      (a 3D run stopped mid-way); it is reused as is, finished scenarios and the restart
-      state are kept.
-
-    Raises `InputError` with a one-line message otherwise.
-    """
-    path = Path(path)
-    if overwrite and resume:
-        raise InputError("--overwrite and --resume contradict each other; pass only one")
-    if path.exists() and not path.is_dir():
-        raise InputError(f"output folder {path} exists and is a file; choose another --out")
-    if path.is_dir() and any(path.iterdir()):
-        if resume:
-            if not any((path / name).is_file() for name in ("study.json", "restart.npz")):
-                raise InputError(
-                    f"cannot resume: output folder {path} is not empty and holds no study.json"
-                    " or restart.npz; choose another --out"
-                )
-            return path
-        if not overwrite:
-            raise InputError(
-                f"output folder {path} exists and is not empty; pass --overwrite or choose"
-                " another --out"
-            )
-        if not is_run_folder(path):
-            raise InputError(
-                f"output folder {path} is not empty and is not a brainbulge output (no run.json"
-                " or study.json); refusing to delete it, choose another --out"
-            )
-        for child in path.iterdir():
-            if child.is_dir() and not child.is_symlink():
-                shutil.rmtree(child)
-            else:
-                child.unlink()
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create output folder {path}: {exc.strerror or exc}") from exc
-    return path
+    return prepare(path, overwrite, resume)
 
 
 # --------------------------------------------------------------------------- configuration
@@ -279,13 +251,17 @@ def _find_seed(config: Mapping[str, Any]) -> Any:
     return None
 
 
-def write_run_record(out_dir: Path, config: Mapping[str, Any], command: list[str] | None) -> Path:
+def write_run_record(
+    out_dir: Path, config: Mapping[str, Any], command: list[str] | None,
+    files: set[str] | None = None,
+) -> Path:
     """Write ``run.toml`` (the resolved ``config``) and ``run.json`` (provenance) into
     ``out_dir``; return the path of ``run.toml``.
 
     ``command`` is the command line to record (``sys.argv`` if None). ``config`` must be
     convertible by `toml_ready` (tuples, paths, enums, dataclasses, numpy values are
-    converted; None values are dropped).
+    converted; None values are dropped). ``files`` (the manifest of a resumed run) are listed
+    in ``run.json["files"]`` with ``run.toml`` and ``run.json``.
     """
     out_dir = Path(out_dir)
     start = datetime.now(UTC).isoformat(timespec="seconds")
@@ -307,6 +283,7 @@ def write_run_record(out_dir: Path, config: Mapping[str, Any], command: list[str
         "start_time": start,
         "seed": _find_seed(table),
         "config_file": toml_path.name,
+        "files": sorted(set(files or ()) | {"run.json", toml_path.name}),
     }
     atomic_write_json(out_dir / "run.json", record)
     return toml_path
@@ -325,4 +302,6 @@ def mark_status(out_dir: Path, status: str, message: str = "") -> Path:
         "message": " ".join(str(message).split()),
         "time": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    return atomic_write_json(Path(out_dir) / "status.json", record)
+    path = atomic_write_json(Path(out_dir) / "status.json", record)
+    refresh_manifest(Path(out_dir))
+    return path

@@ -829,13 +829,18 @@ class NewtonSolver:
         """Restore the state of a restart file of this problem; ``None`` if there is none."""
         if not path.is_file():
             return None
-        try:
-            with np.load(path) as f:
-                data = {k: f[k] for k in f.files}
-        except (OSError, ValueError) as exc:
-            log.warning("restart file %s unreadable (%s): starting from Js = 1", path, exc)
-            return None
         n_lam = len(self.form.multiplier_state())
+        needed = ("key", "ndof", "t", "dt", "last_dt", "x", "increment", "r", "steps",
+                  "rejected")
+        try:  # a truncated or foreign file (BadZipFile, EOFError, zlib.error, ...) is skipped
+            with np.load(path, allow_pickle=False) as f:
+                data = {k: f[k] for k in f.files}
+            if any(k not in data for k in needed):
+                raise ValueError("arrays missing")
+        except Exception as exc:  # noqa: BLE001
+            log.warning("restart file %s unreadable (%s): starting from Js = 1", path,
+                        " ".join(str(exc).split()) or type(exc).__name__)
+            return None
         if (str(data["key"]) != self.opt.checkpoint_key or int(data["ndof"]) != len(x)
                 or any(f"lam{i}" not in data for i in range(n_lam))):
             log.info("restart file %s is of another problem: starting from Js = 1", path)

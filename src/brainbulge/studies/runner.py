@@ -54,6 +54,7 @@ import json
 import logging
 import os
 import re
+import sys
 import traceback
 import uuid
 from collections.abc import Callable, Iterator, Mapping
@@ -64,6 +65,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.results.output_folder import refresh_manifest
 from brainbulge.results.run_record import atomic_write_json
 
 __all__ = ["SERIAL", "Task", "echo_task", "run_study", "validate_scenarios"]
@@ -94,6 +96,8 @@ WORKER_ENV = {
     "NGS_NUM_THREADS": "1",
     "NUMBA_NUM_THREADS": "1",
 }
+
+CONNECT_TIMEOUT = "10s"  #: how long to try to reach an existing Dask scheduler
 
 SUMMARY_FILE = "summary.json"
 ERROR_FILE = "error.json"
@@ -325,7 +329,7 @@ class _Study:
             entry["scenario"] = scenario
             entries.append(entry)
         counts = {s: self.status.count(s) for s in ("complete", "failed", "pending")}
-        return atomic_write_json(
+        path = atomic_write_json(
             self.out_dir / STUDY_FILE,
             {
                 "n_scenarios": len(self.scenarios),
@@ -335,6 +339,8 @@ class _Study:
                 "scenarios": entries,
             },
         )
+        refresh_manifest(self.out_dir)  # the files written so far, for --overwrite
+        return path
 
 
 # --------------------------------------------------------------------------- the runner
@@ -375,7 +381,8 @@ def run_study(
         Worker processes of the local cluster (default 2, at most the number of scenarios to
         run); ignored otherwise.
     progress
-        Show a tqdm progress bar (on stderr) over finished scenarios.
+        Show a tqdm progress bar over finished scenarios when stderr is a terminal; a log
+        line (INFO) per finished scenario in any case.
 
     Raises
     ------
@@ -407,7 +414,7 @@ def run_study(
         initial=len(scenarios) - len(pending),
         unit="scenario",
         desc=f"study {out_dir.name}",
-        disable=not progress or not pending,
+        disable=not progress or not pending or not sys.stderr.isatty(),
     )
     try:
         if not pending:
@@ -431,6 +438,8 @@ def _finish(study: _Study, bar: Any, i: int, outcome: dict[str, Any]) -> None:
     n_failed = study.status.count("failed")
     if n_failed:
         bar.set_postfix(failed=n_failed)
+    logger.info("study %s: %d of %d scenarios finished (%d failed)", study.out_dir.name,
+                len(study.status) - study.status.count("pending"), len(study.status), n_failed)
 
 
 def _run_distributed(
@@ -466,8 +475,9 @@ def _run_distributed(
                 logger.info("Dask dashboard: %s", client.dashboard_link)
         else:
             try:
-                client = stack.enter_context(Client(scheduler, set_as_default=False))
-            except OSError as exc:
+                client = stack.enter_context(
+                    Client(scheduler, set_as_default=False, timeout=CONNECT_TIMEOUT))
+            except (OSError, ValueError) as exc:
                 raise InputError(
                     f"cannot connect to Dask scheduler {scheduler}: {_one_line(exc)}"
                 ) from exc

@@ -1,0 +1,228 @@
+"""Input checks run before ``--out`` is touched: types, ranges, files, addresses.
+
+Each failure is an `InputError` whose one line names the option, the value, the allowed
+range and what to do. The ranges keep a run within what finishes in minutes to hours on a
+workstation and what Netgen can mesh (MODEL.md, docs/outputs.md "Exit codes").
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import types
+import typing
+from pathlib import Path
+from typing import Any, Union
+
+from brainbulge.errors import InputError
+
+#: hemidisk element sizes [units of R]: 0.005 R makes ~150,000 triangles (P2: hours of
+#: Newton); a corner or rim size below 1e-4 R makes Netgen grade over 4 decades
+HEMIDISK_H = (0.005, 1.0)
+HEMIDISK_LOCAL_H_MIN = 1e-4
+#: hemidisk radius [length]: Netgen's absolute tolerances break far outside
+HEMIDISK_R = (1e-3, 1e4)
+#: target Js, as for the brain
+SWELLING = (0.5, 2.0)
+#: edge exclusion around the singular points [units of R]; beyond, max_*/min_* cover little
+HEMIDISK_EDGE_EXCLUSION = (0.0, 0.2)
+#: initial load steps
+STEPS = (1, 1000)
+#: tets of a brain mesh: more than 5 million need more memory than a workstation has
+MESH_TETS = (1_000, 5_000_000)
+#: the coarsest mesh Netgen makes of the ICBM152 template: below ~25,000 target tets it
+#: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
+#: finish in 5 minutes)
+TEMPLATE_TETS_MIN = 25_000
+#: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
+FLAP_CENTRE_MM = 150.0
+#: Dask scheduler addresses: ``[protocol://]host:port``
+SCHEDULER = re.compile(r"((tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]*[A-Za-z0-9\]]:\d{1,5}")
+
+
+# --------------------------------------------------------------------------- generic
+
+
+def number(name: str, value: Any, lo: float, hi: float, unit: str = "",
+           integer: bool = False, hint: str = "") -> None:
+    """``lo <= value <= hi`` (a finite number; a whole one if ``integer``)."""
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    if ok and integer:
+        ok = isinstance(value, int)
+    if not (ok and math.isfinite(value) and lo <= value <= hi):
+        kind, fmt = ("a whole number", "{:,.0f}") if integer else ("a number", "{:g}")
+        raise InputError(f"{name} = {value!r} must be {kind} in [{fmt.format(lo)}, "
+                         f"{fmt.format(hi)}]{unit}" + (f" ({hint})" if hint else ""))
+
+
+def _describe(tp: Any) -> str:
+    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    if typing.get_origin(tp) in (Union, types.UnionType):
+        return " or ".join(_describe(a) for a in args)
+    if tp is float:
+        return "a number"
+    if tp is int:
+        return "a whole number"
+    if tp is bool:
+        return "true or false"
+    if tp is str:
+        return "text in quotes"
+    if typing.get_origin(tp) in (list, tuple):
+        return "a list of numbers" if args and args[0] in (float, int) else "a list"
+    return "a table" if tp is dict or typing.get_origin(tp) is dict else str(tp)
+
+
+def _matches(value: Any, tp: Any) -> bool:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is Any:
+        return True
+    if origin in (Union, types.UnionType):
+        return any(_matches(value, a) for a in args)
+    if tp is type(None):
+        return value is None
+    if tp is bool:
+        return isinstance(value, bool)
+    if tp is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if tp is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if tp is str:
+        return isinstance(value, str)
+    if origin in (list, tuple) or tp in (list, tuple):
+        if not isinstance(value, list | tuple):
+            return False
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            return len(value) == len(args) and all(map(_matches, value, args))
+        return not args or all(_matches(v, args[0]) for v in value)
+    if tp is dict or origin is dict:
+        return isinstance(value, dict)
+    return True
+
+
+def check_types(cls: type, config: dict[str, Any], what: str) -> None:
+    """Every known key of ``config`` has the type of ``cls``'s field (TOML tables)."""
+    hints = typing.get_type_hints(cls)
+    for key, value in config.items():
+        if key in hints and not _matches(value, hints[key]):
+            raise InputError(f"{what} option {key} = {value!r} must be "
+                             f"{_describe(hints[key])}; correct it in the TOML file")
+
+
+# --------------------------------------------------------------------------- hemidisk
+
+
+def hemidisk_case(config: dict[str, Any]) -> Any:
+    """A checked :class:`~brainbulge.model.hemidisk.HemidiskCase` from a plain dict."""
+    from brainbulge.model.hemidisk import HemidiskCase
+    from brainbulge.studies.hemidisk import case_from_dict
+
+    check_types(HemidiskCase, {k: v for k, v in config.items() if k != "name"}, "hemidisk")
+    disk = config.get("disk")
+    if disk is not None:
+        if len(disk) != 3 or not all(math.isfinite(v) for v in disk):
+            raise InputError(f"disk {disk} needs three finite numbers: CX CY RADIUS")
+        number("disk radius", disk[2], 1e-3, 0.9, " R", hint="the swelling disk's size")
+    case = case_from_dict(config)
+    for name, value, lo in (("opening angle beta", case.beta, 0.0),
+                            ("opening centre", case.opening_center, 0.0),
+                            ("sector angle alpha", case.alpha, 1e-3)):
+        if value is not None:
+            number(name, value, lo, 180.0, " deg")
+    number("radius R", case.R, *HEMIDISK_R, hint="lengths scale with R: R = 1 is usual")
+    number("swelling Js", case.swelling, *SWELLING, hint="1.2 = 20% swelling")
+    number("steps", case.steps, *STEPS, integer=True)
+    number("mesh size", case.mesh_size, *HEMIDISK_H, " R",
+           hint="smaller meshes take hours: 0.005 R is ~150,000 triangles")
+    for name in ("corner_mesh_size", "rim_mesh_size"):
+        value = getattr(case, name)
+        if value is not None:
+            number(name.replace("_", " "), value, HEMIDISK_LOCAL_H_MIN, case.mesh_size, " R",
+                   hint="at most the mesh size")
+    number("edge exclusion", case.edge_exclusion, *HEMIDISK_EDGE_EXCLUSION, " R")
+    case.geometry  # noqa: B018 - angles, opening, disk position
+    case.skull  # noqa: B018 - cut-edge radius against the skull's thickness
+    case.tissue_material()
+    return case
+
+
+# --------------------------------------------------------------------------- brain
+
+
+def brain_npz(path: str | Path, what: str = "--mesh") -> None:
+    """``path`` (or ``path/brain.npz``) reads as a brain mesh written by ``brainbulge mesh``."""
+    from brainbulge.geometry.brain import load_brain_mesh
+
+    p = Path(path)
+    p = p / "brain.npz" if p.is_dir() else p
+    if not p.is_file():
+        raise InputError(f"{what} {path}: no such file; build one with `brainbulge mesh --out "
+                         "DIR` and pass DIR/brain.npz")
+    st = p.stat()
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
+    if key in _READABLE:  # a study's scenarios share one mesh
+        return
+    try:
+        load_brain_mesh(p)
+    except Exception:  # noqa: BLE001 - truncated, foreign, text: all the same to the user
+        raise InputError(f"{what} {path} is not a brain.npz written by `brainbulge mesh` "
+                         "(unreadable or other arrays); build one with `brainbulge mesh "
+                         "--out DIR` and pass DIR/brain.npz") from None
+    _READABLE.add(key)
+
+
+_READABLE: set[tuple[str, int, int]] = set()
+
+
+def flap_centre(centre: Any) -> None:
+    if centre is None:
+        return
+    if len(centre) != 3 or not all(math.isfinite(c) and abs(c) <= FLAP_CENTRE_MM
+                                   for c in centre):
+        raise InputError(
+            f"--flap-centre {' '.join(f'{c:g}' for c in centre)} is not near the skull: give "
+            f"a point on it, each coordinate within +-{FLAP_CENTRE_MM:g} mm (world RAS)")
+
+
+def brain_case(config: dict[str, Any]) -> Any:
+    """A checked :class:`~brainbulge.model.brain.CraniectomyCase` from a plain dict."""
+    from brainbulge.model.brain import CraniectomyCase
+    from brainbulge.studies.craniectomy import case_from_dict
+
+    check_types(CraniectomyCase, {k: v for k, v in config.items() if k != "name"}, "brain")
+    case = case_from_dict(config)
+    number("steps", case.steps, *STEPS, integer=True)
+    flap_centre(case.flap_centre_mm)
+    if case.mesh is None:
+        mesh_tets(case.tets, case.refine, template=case.labels is None)
+        if case.coarse_tets is not None:
+            mesh_tets(case.coarse_tets, 0, template=case.labels is None)
+    if case.mesh is not None:
+        brain_npz(case.mesh)
+    if case.coarse_mesh is not None:
+        brain_npz(case.coarse_mesh, "--coarse-mesh")
+    return case
+
+
+def mesh_tets(tets: Any, refine: Any, template: bool) -> None:
+    """A brain mesh of about ``tets`` tets made at ``tets / 8**refine`` and refined; of the
+    ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement."""
+    number("--refine", refine, 0, 3, integer=True)
+    number("--tets", tets, *MESH_TETS, integer=True)
+    if template and tets / 8**refine < TEMPLATE_TETS_MIN:
+        raise InputError(
+            f"--tets {tets}" + (f" / 8^{refine}" if refine else "") + f" is below "
+            f"{TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template that coarse (it "
+            f"retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} or more")
+
+
+# --------------------------------------------------------------------------- study
+
+
+def scheduler(address: str | None) -> None:
+    """``None``, ``serial`` or a Dask address ``[tcp://]host:port``."""
+    if address is None or address == "serial":
+        return
+    if not SCHEDULER.fullmatch(address):
+        raise InputError(
+            f"--scheduler {address!r} is not a Dask scheduler address; give one such as "
+            "tcp://10.0.0.5:8786, 'serial', or leave it out for a local cluster")

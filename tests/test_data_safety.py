@@ -1,0 +1,281 @@
+"""Nothing lost, nothing hidden: locks, manifests, disk full, signals, restart files.
+
+The runs here are fakes of ``run_hemidisk`` (no solve) so that each test takes well under a
+second, except the two that start a second Python process.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import logging
+import os
+import signal
+import socket
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import brainbulge.studies.hemidisk as hd
+from brainbulge.cli import main
+from brainbulge.errors import InputError
+from brainbulge.results.output_folder import LOCK_FILE, claim_output_dir, read_manifest
+from brainbulge.results.run_record import atomic_write_json
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
+SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
+           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0}
+
+
+def fake_run(files: dict[str, bytes], error: BaseException | None = None):
+    """A stand-in for ``run_hemidisk``: writes ``files``, then raises ``error`` or returns."""
+
+    def run(case, out, progress=False):
+        for name, data in files.items():
+            (Path(out) / name).parent.mkdir(parents=True, exist_ok=True)
+            (Path(out) / name).write_bytes(data)
+        if error is not None:
+            raise error
+        return SUMMARY
+
+    return run
+
+
+def status(out: Path) -> dict:
+    return json.loads((out / "status.json").read_text())
+
+
+def one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    return err[0]
+
+
+# --------------------------------------------------------------------------- manifest
+
+
+def test_the_manifest_lists_what_a_run_wrote_and_overwrite_deletes_only_that(
+        tmp_path, monkeypatch, capsys) -> None:
+    out = tmp_path / "out"
+    monkeypatch.setattr(hd, "run_hemidisk", fake_run({"fields.vtu": b"v", "sub/a.npz": b"a"}))
+    assert main([*FAST, "--out", str(out)]) == 0
+    assert read_manifest(out) == {"run.json", "run.toml", "status.json", "brainbulge.log",
+                                  "fields.vtu", "sub/a.npz"}
+    assert not (out / LOCK_FILE).exists() and status(out)["status"] == "complete"
+
+    (out / "sub" / "mine.txt").write_text("a user's file")  # refused, nothing deleted
+    before = sorted(p.name for p in out.rglob("*"))
+    assert main([*FAST, "--out", str(out), "--overwrite"]) == 2
+    assert "sub/mine.txt" in one_line(capsys)
+    assert sorted(p.name for p in out.rglob("*")) == before
+
+    (out / "sub" / "mine.txt").unlink()
+    monkeypatch.setattr(hd, "run_hemidisk", fake_run({"other.vtu": b"o"}))
+    assert main([*FAST, "--out", str(out), "--overwrite"]) == 0
+    assert not (out / "fields.vtu").exists() and not (out / "sub").exists()
+    assert "other.vtu" in read_manifest(out)
+
+
+def test_overwrite_never_clears_the_current_folder_or_an_ancestor(tmp_path, monkeypatch,
+                                                                  capsys) -> None:
+    project = tmp_path / "project"
+    (project / "data").mkdir(parents=True)
+    (project / "run.toml").write_text("command = 'hemidisk'\n[hemidisk]\n")
+    (project / "data" / "scan.nii").write_bytes(b"MRI")
+    monkeypatch.chdir(project / "data")
+    for out in (".", "..", str(tmp_path)):
+        assert main(["run", str(project / "run.toml"), "--out", out, "--overwrite"]) == 2
+        assert "current folder" in one_line(capsys)
+    assert (project / "data" / "scan.nii").read_bytes() == b"MRI"
+
+
+def test_results_are_readable_as_the_umask_allows(tmp_path) -> None:
+    old = os.umask(0o027)
+    try:
+        path = atomic_write_json(tmp_path / "a.json", {"x": 1})
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o640
+    path = atomic_write_json(tmp_path / "b.json", {"x": 1})
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~old
+
+
+# --------------------------------------------------------------------------- lock
+
+
+HOLD = ("import sys, time\n"
+        "from brainbulge.results.output_folder import claim_output_dir\n"
+        "claim_output_dir(sys.argv[1], overwrite=False)\n"
+        "print('locked', flush=True)\n"
+        "time.sleep(120)\n")
+
+
+def test_a_second_process_is_refused_and_a_dead_ones_lock_is_stale(tmp_path, capsys,
+                                                                   caplog) -> None:
+    out = tmp_path / "out"
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(out)], env=ENV,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        assert main([*FAST, "--out", str(out)]) == 2
+        line = one_line(capsys)
+        assert "in use by another brainbulge run" in line and str(holder.pid) in line
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]  # no status written
+    finally:
+        holder.kill()
+        holder.wait()
+    with caplog.at_level(logging.WARNING):
+        folder = claim_output_dir(out, overwrite=False)  # the holder is gone: stale
+    assert "stale lock" in caplog.text
+    assert json.loads((out / LOCK_FILE).read_text())["pid"] == os.getpid()
+    folder.release()
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_a_lock_of_another_host_is_respected(tmp_path) -> None:
+    (tmp_path / LOCK_FILE).write_text(json.dumps(
+        {"pid": 1, "host": socket.gethostname() + "-elsewhere", "started": time.time()}))
+    with pytest.raises(InputError, match="in use"):
+        claim_output_dir(tmp_path, overwrite=False)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    (tmp_path / LOCK_FILE).write_text(json.dumps(
+        {"pid": int(dead), "host": socket.gethostname(), "started": time.time() - 5}))
+    claim_output_dir(tmp_path, overwrite=False).release()
+
+
+# --------------------------------------------------------------------------- failures
+
+
+@pytest.mark.parametrize("code,words", [(errno.ENOSPC, "no space left on device"),
+                                        (errno.EROFS, "read-only file system")])
+def test_disk_full_or_read_only_is_one_line_and_a_true_status(tmp_path, monkeypatch, capsys,
+                                                              code, words) -> None:
+    out = tmp_path / "out"
+    error = OSError(code, os.strerror(code), str(out / "fields.vtu"))
+    monkeypatch.setattr(hd, "run_hemidisk",
+                        fake_run({"fields.png": b"png", "fields.vtu": b""}, error))
+    assert main([*FAST, "--out", str(out)]) == 2
+    line = one_line(capsys)
+    assert line.startswith(f"error: cannot write {out / 'fields.vtu'}: {words}")
+    assert ("free some space" if code == errno.ENOSPC else "writable --out") in line
+    assert status(out)["status"] == "failed" and words in status(out)["message"]
+    assert (out / "fields.png").read_bytes() == b"png"  # results so far kept
+    assert (out / "fields.vtu").exists() == (code != errno.ENOSPC)  # no empty leftovers
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_an_interruption_says_truthfully_what_is_kept(tmp_path, monkeypatch, capsys) -> None:
+    out = tmp_path / "out"
+    monkeypatch.setattr(hd, "run_hemidisk", fake_run({}, KeyboardInterrupt()))
+    assert main([*FAST, "--out", str(out)]) == 130
+    assert "before any results were written" in one_line(capsys)
+    assert status(out)["status"] == "incomplete"
+    monkeypatch.setattr(hd, "run_hemidisk", fake_run({"fields.vtu": b"v"}, KeyboardInterrupt()))
+    assert main([*FAST, "--out", str(tmp_path / "o2")]) == 130
+    assert "results finished so far are kept" in one_line(capsys)
+
+
+SLOW = ("import subprocess, sys, time\n"
+        "from pathlib import Path\n"
+        "import brainbulge.studies.hemidisk as hd\n"
+        "from brainbulge.cli import main\n"
+        "def slow(case, out, progress=False):\n"
+        "    (Path(out) / 'fields.png').write_bytes(b'png')\n"
+        "    child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'])\n"
+        "    (Path(out) / 'child.pid').write_text(str(child.pid))\n"
+        "    time.sleep(120)\n"
+        "hd.run_hemidisk = slow\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+
+
+def test_sigterm_ends_child_processes_and_leaves_a_true_status(tmp_path) -> None:
+    import psutil
+
+    out = tmp_path / "out"
+    run = subprocess.Popen([sys.executable, "-c", SLOW, *FAST, "--out", str(out)], env=ENV,
+                           stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(600):
+            if (out / "child.pid").is_file() and (out / "child.pid").read_text():
+                break
+            time.sleep(0.1)
+        child = int((out / "child.pid").read_text())
+        assert psutil.pid_exists(child)
+        run.send_signal(signal.SIGTERM)
+        _, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+    assert run.returncode == 130
+    assert err.strip().splitlines() == [f"interrupted: results finished so far are kept in {out}"]
+    assert status(out) | {"time": None} == {"status": "incomplete",
+                                            "message": "stopped by SIGTERM", "time": None}
+    assert not psutil.pid_exists(child) or psutil.Process(child).status() == "zombie"
+    assert not (out / LOCK_FILE).exists() and "fields.png" in read_manifest(out)
+
+
+def test_a_truncated_restart_file_is_skipped_with_a_warning(tmp_path, caplog) -> None:
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+    from brainbulge.solver.newton import Solution
+
+    path = tmp_path / "restart.npz"
+    np.savez(path, key="k", ndof=3, x=np.arange(1000.0))
+    path.write_bytes(path.read_bytes()[:300])
+    form = MixedForm(hemidisk_problem(HemidiskCase(mesh_size=0.3)))
+    solver = NewtonSolver(form, SolverOptions(steps=1, checkpoint=path, checkpoint_key="k"))
+    with caplog.at_level(logging.WARNING):
+        assert solver._read_checkpoint(path, form.gfu.vec, Solution.__new__(Solution)) is None
+    assert "unreadable" in caplog.text
+    np.savez(path, a=np.arange(3))  # a foreign npz: the same
+    assert solver._read_checkpoint(path, form.gfu.vec, Solution.__new__(Solution)) is None
+
+
+# --------------------------------------------------------------------------- studies
+
+
+def test_a_study_folder_of_other_scenarios_is_refused_unless_overwrite(tmp_path, capsys,
+                                                                       monkeypatch) -> None:
+    import brainbulge.cli.study as study
+
+    out = tmp_path / "study"
+    calls = []
+
+    def fake(name, scenarios, out, scheduler, workers):
+        for sc in scenarios:
+            (out / sc["name"]).mkdir(exist_ok=True)
+            (out / sc["name"] / "summary.json").write_text("{}")
+        (out / "study.json").write_text("{}")
+        calls.append(name)
+        return len(scenarios)
+
+    monkeypatch.setattr(study, "run_study_and_report", fake)
+    argv = ["study", "hemidisk-sector", "--alphas", "20", "--betas", "30", "--out", str(out)]
+    assert main(argv) == 0
+    assert main(argv) == 0  # the same study resumes
+    before = sorted(p.relative_to(out).as_posix() for p in out.rglob("*"))
+    assert main(["study", "hemidisk-disk", "--out", str(out)]) == 2
+    assert "holds a study of 'hemidisk-sector'" in one_line(capsys)
+    assert main([*argv[:3], "40", *argv[4:]]) == 2
+    assert "other scenarios (noslip_a20_b30, sliding_a20_b30)" in one_line(capsys)
+    assert main([*argv, "--steps", "2"]) == 2
+    assert "other options (scenario noslip_a20_b30, scenario sliding_a20_b30)" in one_line(
+        capsys)
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == before
+    assert main(["study", "hemidisk-disk", "--out", str(out), "--overwrite"]) == 0
+    assert not (out / "noslip_a20_b30").exists() and calls[-1] == "hemidisk-disk"
+
+
+def test_study_progress_is_plain_lines_in_a_log(tmp_path, caplog) -> None:
+    from brainbulge.studies.runner import echo_task, run_study
+
+    with caplog.at_level(logging.INFO):
+        run_study([{"name": "a"}, {"name": "b"}], echo_task, tmp_path, scheduler="serial")
+    assert "2 of 2 scenarios finished (0 failed)" in caplog.text
