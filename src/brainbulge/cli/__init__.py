@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge import __version__
-from brainbulge.errors import BrainbulgeError
+from brainbulge.errors import BrainbulgeError, InputError
 from brainbulge.runtime import configure as configure_runtime
 
 log = logging.getLogger("brainbulge")
