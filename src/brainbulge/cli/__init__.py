@@ -286,3 +286,9 @@ def add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument(
         "--overwrite", action="store_true", help="replace an existing brainbulge output folder"
     )
+
+
+def require(cond: bool, message: str) -> None:
+    """Refuse the command with ``message`` (one line, exit 2) unless ``cond`` holds."""
+    if not cond:
+        raise InputError(message)
