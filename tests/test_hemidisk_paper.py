@@ -164,6 +164,7 @@ def test_sliding_headline_reaches_over_the_arc_end(sliding) -> None:
     assert case.skull_arc.crossing(x) > 5e-3
 
 
+@pytest.mark.slow
 def test_coarse_sector_study_completes(tmp_path) -> None:
     """All 32 scenarios of the sector study (both contacts) reach full load on a coarse
     mesh; the report checks the paper's trends on them."""

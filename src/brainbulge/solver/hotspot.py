@@ -76,10 +76,7 @@ class HotspotRelaxation:
 
     @staticmethod
     def applies(form) -> bool:
-        """MINI in 3D: in 2D a global Newton iteration costs less than the patch's
-        hand-assembled one (the hemidisk alpha 80 / beta 30 at h = 0.2 R spent 40 of 68 s
-        in it)."""
-        return form.element == "mini" and form.dim == 3
+        return form.element == "mini"
 
     # --- where the residual is ---------------------------------------------------------
     def _build_maps(self) -> tuple:
