@@ -159,3 +159,49 @@ def test_a_segmentation_without_ventricles_warns(tmp_path: Path,
     with caplog.at_level(logging.WARNING, logger="brainbulge"):
         brain_summary.warn_if_guessed(found)
     assert "bounding box" in caplog.text
+
+
+# --- the paper's Figure 9: deformed surface views ---------------------------------------
+def test_surface_views_are_drawn_and_show_the_flap(toy_run) -> None:
+    """``surface.png``: not blank (most of each panel is painted), with the flap's rim in
+    black; seen from the flap, the flap faces face the viewer and carry the largest |u|."""
+    import matplotlib.image as mpimg
+
+    from brainbulge.results.views3d import Surface, view_frame
+
+    _, run = toy_run
+    img = mpimg.imread(run / "surface.png")[..., :3]
+    painted = (img < 0.95).any(axis=2).mean()
+    assert painted > 0.25
+    black = (img.max(axis=2) < 0.1).sum()
+    assert black > 200  # the rim lines (and little else is black)
+    s = Surface.load(run / "surface.npz")
+    R = view_frame("flap", s.flap_direction)
+    x = s.points + s.u
+    tri = x[s.faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    facing = n @ R[2] < 0
+    assert facing[s.flap_faces].mean() > 0.95
+    u_face = s.fields["u_magnitude"][s.faces].mean(axis=1)
+    assert u_face[s.flap_faces].mean() > 1.5 * u_face[~s.flap_faces].mean()
+
+
+def test_study_surfaces_share_one_colour_range_per_field(toy_run, tmp_path: Path) -> None:
+    from brainbulge.results.views3d import Surface, shared_ranges, write_study_surfaces
+
+    _, run = toy_run
+    s = Surface.load(run / "surface.npz")
+    double = Surface(s.points, s.faces, 2 * s.u, {k: v.copy() for k, v in s.fields.items()},
+                     s.flap_faces, s.flap_direction)
+    double.fields["u_magnitude"] *= 2
+    ranges = shared_ranges([s, double])
+    assert ranges["u_magnitude"][1] == pytest.approx(
+        np.percentile(double.fields["u_magnitude"], 99.5))
+    lo, hi = ranges["lambda_n"]
+    assert lo + hi == pytest.approx(2.0)  # symmetric about 1
+    for name, surf in (("a", s), ("b", double)):
+        (tmp_path / name).mkdir()
+        surf.save(tmp_path / name / "surface.npz")
+    paths = write_study_surfaces(tmp_path, ["a", "b", "missing"])
+    assert [p.name for p in paths] == ["surfaces-above.png", "surfaces-flap.png"]
+    assert all(p.stat().st_size > 10_000 for p in paths)

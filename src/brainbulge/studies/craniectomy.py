@@ -1,13 +1,15 @@
 """The 3D craniectomy (MODEL.md section 6): one scenario, and the paper's six as a study.
 
 ``run_brain(case, out_dir)`` solves one scenario and writes ``summary.json``, ``fields.vtu``
-(ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``
-and ``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
-ranges). A run that stops early keeps the last converged state on disk, marked
-``"converged": false``, and raises :class:`~brainbulge.errors.ConvergenceError`. While it
-runs, ``restart.npz`` holds the state after the last accepted load step: the same scenario
-run again into the same directory (after a kill, or the end of a batch job's time) resumes
-from there; the file is removed when the run completes.
+(ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``,
+``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
+ranges) and ``surface.png`` / ``surface.npz`` (the deformed surface seen from above and from
+the flap, :mod:`brainbulge.results.views3d`). A run that stops early keeps the last converged
+state on disk, marked ``"converged": false``, and raises
+:class:`~brainbulge.errors.ConvergenceError`. While it runs, ``restart.npz`` holds the state
+after the last accepted load step: the same scenario run again into the same directory (after
+a kill, or the end of a batch job's time) resumes from there; the file is removed when the
+run completes.
 
 Clinical metrics (lengths mm, volumes ml, stresses kPa), named for what they are
 (:mod:`brainbulge.results.brain_summary`; every key in docs/outputs.md):
@@ -60,6 +62,7 @@ from brainbulge.results.export import (
 from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
+from brainbulge.results.views3d import write_study_surfaces, write_surface_views
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.sequencing import solve_sequenced
 
@@ -142,6 +145,8 @@ def run_brain(
     )
     state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
     section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
+    write_surface_views(vf.points, vf.point_data, bm, case.flap, out_dir,
+                        title=f"{case.name}{state}")
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
@@ -370,6 +375,10 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
         vals = " | ".join(f"{float(r.get(k) or 0):.4g}" for k in COMPARISON)
         lines.append(f"| {sc['name']} | {vals} |")
     lines += ["", "![comparison](comparison.png)", ""]
+    for view in write_study_surfaces(out_dir, [sc["name"] for sc, r in zip(scenarios, rows,
+                                                                          strict=True)
+                                               if r.get("complete")]):
+        lines += [f"![{view.stem}]({view.name})", ""]
     for sc, r in zip(scenarios, rows, strict=True):
         if r.get("complete"):
             lines += [f"## {sc['name']}", "", f"![{sc['name']}]({sc['name']}/sections.png)", ""]
