@@ -13,6 +13,11 @@ voxel-built tissue interface, where the stiffness or ``Js`` jumps), the volume p
 for the fraction ``q``, over the same points as ``max_*`` weighted by their quadrature
 volumes. A singular peak changes it only by the volume it covers, which vanishes under
 refinement.
+
+Every stretch and strain is evaluated from the recovered gradient (the region-wise L2
+projection of ``Grad u`` onto continuous P1, :mod:`brainbulge.results.recovery`), not from
+the element-wise constant ``Grad u``: the element-to-element noise of the latter moved the
+percentiles with the mesh. ``J`` and the constraint statistics use the solution's own ``J``.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import numpy as np
 
 from brainbulge.results.fields import output_fields, sample
 from brainbulge.results.quadrature import quadrature_points
+from brainbulge.results.recovery import recovered_gradient
 from brainbulge.solver.newton import NewtonSolver, Solution
 
 #: summary key stem -> (field name, extreme kinds)
@@ -176,10 +182,12 @@ def _sampled_scalars(form, points, centre: np.ndarray,
                      fibres: Callable[[np.ndarray], np.ndarray] | None
                      ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Reference coordinates ``X``, swelling ``Js`` and the scalar output fields at
-    ``points``, evaluated ``CHUNK`` points at a time."""
+    ``points``, evaluated ``CHUNK`` points at a time, stretches and strains from the
+    recovered gradient."""
+    G = recovered_gradient(form.mesh, form.output_displacement())
     parts = []
     for a in range(0, len(points), CHUNK):
-        s = sample(form, points[a:a + CHUNK])
+        s = sample(form, points[a:a + CHUNK], gradient=G)
         f = output_fields(s, centre, None if fibres is None else fibres(s.X))
         parts.append((s.X, s.Js, {k: v for k, v in f.items() if v.ndim == 1}))
     X = np.concatenate([part[0] for part in parts])
