@@ -164,7 +164,8 @@ def test_a_segmentation_without_ventricles_warns(tmp_path: Path,
 # --- the paper's Figure 9: deformed surface views ---------------------------------------
 def test_surface_views_are_drawn_and_show_the_flap(toy_run) -> None:
     """``surface.png``: not blank (most of each panel is painted), with the flap's rim in
-    black; seen from the flap, the flap faces face the viewer and carry the largest |u|."""
+    black; seen from the flap, the brain surface under the flap faces the viewer and carries
+    the largest |u|."""
     import matplotlib.image as mpimg
 
     from brainbulge.results.views3d import Surface, view_frame
@@ -180,8 +181,10 @@ def test_surface_views_are_drawn_and_show_the_flap(toy_run) -> None:
     x = s.points + s.u
     tri = x[s.faces]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    facing = n @ R[2] < 0
-    assert facing[s.flap_faces].mean() > 0.95
+    # the parenchyma surface under the flap (jagged: tet faces) faces the viewer on the whole
+    net = n[s.flap_faces].sum(axis=0) / np.linalg.norm(n[s.flap_faces], axis=1).sum()
+    assert net @ R[2] < -0.3
+    assert len(s.rim) > 10
     u_face = s.fields["u_magnitude"][s.faces].mean(axis=1)
     assert u_face[s.flap_faces].mean() > 1.5 * u_face[~s.flap_faces].mean()
 

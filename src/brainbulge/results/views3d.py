@@ -1,7 +1,8 @@
 """Views of the deformed brain surface coloured by a field, in the layout of the paper's
 Figure 9 (PNG, matplotlib only: headless, no OpenGL).
 
-The outer surface of the tet mesh (outward triangles) is drawn at its deformed position
+The outer surface of the parenchyma (the tets that are not CSF filler; outward triangles) is
+drawn at its deformed position
 ``x = X + u`` in an orthographic projection along a view direction ``d``: triangles facing
 the viewer (``n . d < 0`` with ``n`` the deformed outward normal) are painted back to front
 (painter's algorithm, by their centroid's depth), each in the colour of the mean of its
@@ -45,14 +46,18 @@ SURFACE_RANGES: dict[str, tuple[float, float]] = {
     "lambda_t": (0.8, 1.2),
 }
 VIEWS = ("above", "flap")
+#: parenchyma faces within this distance of the skull surface's flap count as the flap's
+FLAP_DEPTH_MM = 8.0
 RIM = {"color": "black", "lw": 1.2}
 
 
 @dataclass
 class Surface:
     """A deformed outer surface: reference ``points`` (n, 3) mm, outward ``faces`` (f, 3),
-    displacement ``u`` (n, 3) mm, nodal ``fields`` (name -> (n,)), the flap's ``flap_faces``
-    (bool (f,)) and ``flap_direction`` (unit vector from the brain's centre to the flap)."""
+    displacement ``u`` (n, 3) mm, nodal ``fields`` (name -> (n,)), the faces under the flap
+    ``flap_faces`` (bool (f,)), ``flap_direction`` (unit vector from the brain's centre to the
+    flap) and the flap's ``rim`` (e, 2): edges between points, drawn as a line (default: the
+    boundary of ``flap_faces``)."""
 
     points: np.ndarray
     faces: np.ndarray
@@ -60,11 +65,17 @@ class Surface:
     fields: dict[str, np.ndarray]
     flap_faces: np.ndarray
     flap_direction: np.ndarray
+    rim: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.rim is None:
+            self.rim = _rim_edges(np.asarray(self.faces), np.asarray(self.flap_faces, bool))
 
     def save(self, path: Path) -> Path:
         """``surface.npz`` of a scenario: what :func:`plot_study_surfaces` reads."""
         np.savez_compressed(path, points=self.points, faces=self.faces, u=self.u,
                             flap_faces=self.flap_faces, flap_direction=self.flap_direction,
+                            rim=self.rim,
                             **{f"field_{k}": v for k, v in self.fields.items()})
         return Path(path)
 
@@ -73,7 +84,7 @@ class Surface:
         d = np.load(path)
         fields = {k[len("field_"):]: d[k] for k in d.files if k.startswith("field_")}
         return cls(d["points"], d["faces"], d["u"], fields, d["flap_faces"],
-                   d["flap_direction"])
+                   d["flap_direction"], d["rim"] if "rim" in d.files else None)
 
 
 def view_frame(view: str, flap_direction: np.ndarray) -> np.ndarray:
@@ -107,9 +118,10 @@ def draw_surface(ax, s: Surface, field: str, view: str, vmin: float, vmax: float
     rgba = mappable.to_rgba(value)
     rgba[:, :3] *= (0.55 + 0.45 * np.abs(n[order] @ R[2]))[:, None]
     ax.add_collection(PolyCollection(screen, facecolors=rgba, edgecolors=rgba, linewidths=0.3))
-    rim = _rim_edges(s.faces, s.flap_faces & facing)
-    if len(rim):
-        ax.add_collection(LineCollection(x[rim] @ R[:2].T, **RIM))
+    if len(s.rim):  # the rim's edges on the viewer's side of the brain's centre
+        mid = x[s.rim].mean(axis=1)
+        near = (mid - x.mean(axis=0)) @ R[2] < 0
+        ax.add_collection(LineCollection(x[s.rim[near]] @ R[:2].T, **RIM))
     all_xy = x @ R[:2].T
     lo, hi = all_xy.min(axis=0), all_xy.max(axis=0)
     pad = 0.03 * (hi - lo).max()
@@ -201,21 +213,62 @@ def plot_study_surfaces(surfaces: dict[str, Surface], path: str | Path, view: st
     return Path(path)
 
 
-def write_surface_views(points: np.ndarray, point_data: dict[str, np.ndarray], bm,
-                        flap: str, out_dir: Path, title: str = "") -> Path:
-    """A scenario's ``surface.png`` and ``surface.npz`` from its vertex fields (nodes in the
-    order of the brain mesh ``bm``, a :class:`~brainbulge.geometry.brain.BrainMesh`)."""
+def brain_surface(nodes: np.ndarray, tets: np.ndarray, brain_tets: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary of the tets in ``brain_tets`` (bool): triangles (f, 3) oriented outward
+    (away from their tet's fourth vertex) and the tet of each."""
+    T = np.asarray(tets)[brain_tets]
+    owner = np.flatnonzero(brain_tets)
+    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+    tri = T[:, local].reshape(-1, 3)
+    key = np.sort(tri, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    once = counts[inverse.ravel()] == 1
+    tri, tet = tri[once], np.repeat(owner, 4)[once]
+    opposite = np.asarray(tets)[tet, np.tile(np.arange(4), len(T))[once]]  # face k: not k
+    X = np.asarray(nodes, dtype=float)
+    n = np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]])
+    inward = np.einsum("ij,ij->i", n, X[opposite] - X[tri[:, 0]]) > 0
+    tri[inward] = tri[inward][:, [0, 2, 1]]
+    return tri, tet
+
+
+def write_surface_views(vf, bm, flap: str, out_dir: Path, title: str = "") -> Path:
+    """A scenario's ``surface.png`` and ``surface.npz``: the surface of the parenchyma (the
+    brain without the CSF filler around it) of the brain mesh ``bm`` (a
+    :class:`~brainbulge.geometry.brain.BrainMesh`) with its vertex fields ``vf`` (a
+    :class:`~brainbulge.results.export.VertexFields` on ``bm``'s nodes; its regions named
+    ``csf_*`` are the filler): each field at a vertex is the mean of the element values of the
+    parenchyma tets around it. The flap's rim is
+    that of the skull surface's flap."""
     centre = np.asarray(bm.envelope.centre_mm(), dtype=float)
+    csf = np.array([str(n).startswith("csf") for n in vf.region_names] + [False])
+    brain = ~csf[np.asarray(vf.regions)]
+    faces, _ = brain_surface(vf.points, vf.cells, brain)
+    fields = {}
+    vid = np.asarray(vf.cells)[brain].ravel()
+    count = np.maximum(np.bincount(vid, minlength=len(vf.points)), 1)
+    for k in SURFACE_FIELDS:
+        cell = np.repeat(np.asarray(vf.cell_data[k], dtype=float)[brain], 4)
+        fields[k] = np.bincount(vid, weights=cell, minlength=len(vf.points)) / count
     if flap in bm.flaps:
-        mask = np.asarray(bm.flap_faces[flap], dtype=bool)
+        # the parenchyma faces under the flap: nearest to a flap face of the outer surface,
+        # within FLAP_DEPTH_MM of it (not the walls of a ventricle below the flap)
+        from scipy.spatial import cKDTree
+
+        outer = vf.points[np.asarray(bm.faces)].mean(axis=1)
+        dist, near = cKDTree(outer).query(vf.points[faces].mean(axis=1))
+        on_flap = np.asarray(bm.flap_faces[flap], dtype=bool)
+        mask = on_flap[near] & (dist < FLAP_DEPTH_MM)
+        rim = _rim_edges(np.asarray(bm.faces), on_flap)  # on the skull surface: a clean curve
         direction = np.asarray(bm.flaps[flap].centre_mm, dtype=float) - centre
     else:  # intact skull: seen from the left
-        mask = np.zeros(len(bm.faces), dtype=bool)
+        mask = np.zeros(len(faces), dtype=bool)
+        rim = np.zeros((0, 2), dtype=int)
         direction = np.array([-1.0, 0.0, 0.0])
-    s = Surface(np.asarray(points, dtype=float), np.asarray(bm.faces),
-                np.asarray(point_data["u"], dtype=float),
-                {k: np.asarray(point_data[k], dtype=float) for k in SURFACE_FIELDS}, mask,
-                direction / np.linalg.norm(direction))
+    s = Surface(np.asarray(vf.points, dtype=float), faces,
+                np.asarray(vf.point_data["u"], dtype=float), fields, mask,
+                direction / np.linalg.norm(direction), rim)
     s.save(Path(out_dir) / "surface.npz")
     return plot_surface_views(s, Path(out_dir) / "surface.png", title=title)
 

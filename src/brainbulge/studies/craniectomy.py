@@ -145,8 +145,7 @@ def run_brain(
     )
     state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
     section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
-    write_surface_views(vf.points, vf.point_data, bm, case.flap, out_dir,
-                        title=f"{case.name}{state}")
+    write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
