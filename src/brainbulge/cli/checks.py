@@ -140,7 +140,7 @@ def hemidisk_case(config: dict[str, Any]) -> Any:
                    hint="at most the mesh size")
     number("edge exclusion", case.edge_exclusion, *HEMIDISK_EDGE_EXCLUSION, " R")
     case.geometry  # noqa: B018 - angles, opening, disk position
-    case.skull  # noqa: B018 - cut-edge radius against the skull's thickness
+    case.rigid_skull  # noqa: B018 - cut-edge radius against the skull's thickness
     case.tissue_material()
     return case
 

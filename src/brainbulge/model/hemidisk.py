@@ -142,10 +142,8 @@ class HemidiskCase:
         return SkullArc2D(R=self.R, beta_deg=self.beta, center_deg=self.opening_center)
 
     @property
-    def obstacle(self) -> SkullArc2D | RigidSkull2D:
-        """The skull the tissue is in contact with: the paper's arc or the rigid shell."""
-        if self.skull == "paper":
-            return self.skull_arc
+    def rigid_skull(self) -> RigidSkull2D:
+        """The rigid shell of the ``rigid`` skull (its parameters are checked for either)."""
         return RigidSkull2D(
             R=self.R,
             beta_deg=self.beta,
@@ -153,6 +151,11 @@ class HemidiskCase:
             thickness=self.skull_thickness * self.R,
             edge_radius=self.skull_edge_radius * self.R,
         )
+
+    @property
+    def obstacle(self) -> SkullArc2D | RigidSkull2D:
+        """The skull the tissue is in contact with: the paper's arc or the rigid shell."""
+        return self.skull_arc if self.skull == "paper" else self.rigid_skull
 
     def tissue_material(self) -> MooneyRivlin:
         mats = preset(self.material)
