@@ -229,7 +229,8 @@ def brain_summary(
     out["deformed_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets, u)
     out["swelling_volume_ml"] = out.pop("swelling_volume") / 1000.0
     out["white_matter_swelling_ml"] = white_matter_volume_ml(bm, SWELL_SIDES[case.swell])
-    out["flap_area_cm2"] = bm.flap_area_cm2(case.flap)
+    out["flap_nominal_area_cm2"] = bm.flap_area_cm2(case.flap)
+    out["flap_area_cm2"] = bm.free_area_cm2(case.flap, case.edge_radius_mm)
     out["max_pressure_kpa"] = out.pop("max_pressure")
     out["min_pressure_kpa"] = out.pop("min_pressure")
     out["mean_pressure_mmhg"] = _mean_parenchyma_pressure(form) * KPA_TO_MMHG

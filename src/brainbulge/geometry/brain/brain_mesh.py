@@ -40,6 +40,10 @@ log = logging.getLogger("brainbulge")
 #: Fraction of the envelope's inferior-superior extent below the default base cut plane:
 #: 0.12 puts it at z = -54 mm in MNI space, about the foramen magnum.
 BASE_FRACTION = 0.12
+#: A face is left free by the skull where the skull with the flap is this much farther from
+#: its centroid than the intact skull (mm): well below the mesh's chord heights, above the
+#: spline's round-off.
+FREE_GAP_MM = 0.01
 
 
 @dataclass
@@ -91,9 +95,23 @@ class BrainMesh:
         return {str(n): float(vol[names == n].sum() / 1000) for n in np.unique(names)}
 
     def flap_area_cm2(self, name: str) -> float:
-        """Area of a flap on the outer surface (cm^2)."""
+        """Nominal area of a flap (cm^2): the outer faces whose centroid lies inside its
+        cutter, the flap as specified."""
         area = face_areas_mm2(self.nodes_mm, self.faces)
         return float(area[self.flap_faces[name]].sum() / 100)
+
+    def free_area_cm2(self, name: str, edge_radius_mm: float = EDGE_RADIUS_MM) -> float:
+        """Area of the outer surface the skull leaves free with flap ``name`` open (cm^2):
+        the flap's faces, and the faces (base excluded) where the skull with the flap and its
+        rounded cut edge lies more than :data:`FREE_GAP_MM` farther from the centroid than the
+        intact skull does. With the rounding in the bone it matches :meth:`flap_area_cm2`."""
+        area = face_areas_mm2(self.nodes_mm, self.faces)
+        centroids = self.nodes_mm[self.faces].mean(axis=1)
+        skull = self.skull(name, edge_radius_mm)
+        phi_env, _ = skull.envelope_distance(centroids, gradient=False)
+        phi, _ = skull.signed_distance(centroids, gradient=False)
+        free = self.flap_faces[name] | ((phi_env - phi > FREE_GAP_MM) & ~self.base)
+        return float(area[free].sum() / 100)
 
     def boundary_names(self, flap: str | None = None) -> np.ndarray:
         """``"base"``, ``"skull"`` or ``"flap"`` for each outer face, for the given flap."""

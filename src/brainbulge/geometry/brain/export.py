@@ -13,6 +13,7 @@ import numpy as np
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain.boundaries import Flap
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
+from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
 from brainbulge.geometry.brain.labels import TISSUES
 from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane
@@ -24,7 +25,9 @@ BOUNDARY_CODES = {"base": 1, "skull": 2, "flap": 3}
 
 
 def brain_summary(mesh: BrainMesh) -> dict:
-    """The content of ``mesh.json``: sizes, volumes (ml), quality, flap areas (cm^2)."""
+    """The content of ``mesh.json``: sizes, volumes (ml), quality, flap areas (cm^2: the
+    nominal flap, and the surface the skull leaves free with the default rounding of its
+    cut edge)."""
     mesh_vol = mesh.tissue_volumes_ml()
     return {
         "units": {"length": "mm", "volume": "ml", "area": "cm^2"},
@@ -45,8 +48,10 @@ def brain_summary(mesh: BrainMesh) -> dict:
         "quality": mesh.quality(),
         "base": {"cut_plane_z_mm": mesh.base_z_mm, "faces": int(mesh.base.sum()),
                  "area_cm2": float(_area(mesh, mesh.base))},
-        "flaps": {name: {"area_cm2": mesh.flap_area_cm2(name), "faces":
-                         int(mesh.flap_faces[name].sum()), **_flap_dict(f)}
+        "flaps": {name: {"flap_nominal_area_cm2": mesh.flap_area_cm2(name),
+                         "flap_area_cm2": mesh.free_area_cm2(name),
+                         "edge_radius_mm": EDGE_RADIUS_MM,
+                         "faces": int(mesh.flap_faces[name].sum()), **_flap_dict(f)}
                   for name, f in mesh.flaps.items()},
         "timings_s": mesh.timings_s,
     }
