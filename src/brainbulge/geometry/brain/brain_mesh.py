@@ -17,6 +17,7 @@ from brainbulge.errors import InputError, MeshError
 from brainbulge.geometry.brain.boundaries import (
     UNILATERAL_DIAMETER_MM,
     Flap,
+    SuperiorBand,
     boundary_faces,
     custom_flap,
     face_areas_mm2,
@@ -113,12 +114,28 @@ class BrainMesh:
         free = self.flap_faces[name] | ((phi_env - phi > FREE_GAP_MM) & ~self.base)
         return float(area[free].sum() / 100)
 
-    def boundary_names(self, flap: str | None = None) -> np.ndarray:
-        """``"base"``, ``"skull"`` or ``"flap"`` for each outer face, for the given flap."""
-        names = np.where(self.base, "base", "skull").astype("<U5")
+    def boundary_names(self, flap: str | None = None,
+                       superior: SuperiorBand | None = None) -> np.ndarray:
+        """``"base"``, ``"superior"``, ``"skull"`` or ``"flap"`` for each outer face, for the
+        given flap and fixed superior band (``None``: none). A flap that crosses the band
+        wins (the skull there is removed), with a warning."""
+        names = np.where(self.base, "base", "skull").astype("<U8")
+        if superior is not None:
+            names[self.superior_faces(superior)] = "superior"
         if flap is not None:
-            names[self._flap_mask(flap)] = "flap"
+            mask = self._flap_mask(flap)
+            crossed = mask & (names == "superior")
+            if crossed.any():
+                log.warning("flap %r crosses the fixed superior band: %d of its faces are "
+                            "traction-free, not fixed", flap, int(crossed.sum()))
+            names[mask] = "flap"
         return names
+
+    def superior_faces(self, band: SuperiorBand) -> np.ndarray:
+        """Mask of the outer faces (base excluded) in the superior ``band``."""
+        centroids = self.nodes_mm[self.faces].mean(axis=1)
+        return band.contains(centroids, self.midsagittal.point_mm, self.midsagittal.normal,
+                             self.envelope.centre_mm()) & ~self.base
 
     def _flap_mask(self, flap: str) -> np.ndarray:
         if flap not in self.flap_faces:

@@ -11,7 +11,7 @@ import meshio
 import numpy as np
 
 from brainbulge.errors import InputError
-from brainbulge.geometry.brain.boundaries import Flap
+from brainbulge.geometry.brain.boundaries import Flap, SuperiorBand
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
 from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
@@ -21,7 +21,7 @@ from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane
 log = logging.getLogger("brainbulge")
 
 #: Boundary codes in the VTU/XDMF files (cell data ``boundary`` on triangles).
-BOUNDARY_CODES = {"base": 1, "skull": 2, "flap": 3}
+BOUNDARY_CODES = {"base": 1, "skull": 2, "flap": 3, "superior": 4}
 
 
 def brain_summary(mesh: BrainMesh) -> dict:
@@ -48,6 +48,7 @@ def brain_summary(mesh: BrainMesh) -> dict:
         "quality": mesh.quality(),
         "base": {"cut_plane_z_mm": mesh.base_z_mm, "faces": int(mesh.base.sum()),
                  "area_cm2": float(_area(mesh, mesh.base))},
+        "superior": _superior_dict(mesh, SuperiorBand()),
         "flaps": {name: {"flap_nominal_area_cm2": mesh.flap_area_cm2(name),
                          "flap_area_cm2": mesh.free_area_cm2(name),
                          "edge_radius_mm": EDGE_RADIUS_MM,
@@ -63,6 +64,12 @@ def _area(mesh: BrainMesh, mask: np.ndarray) -> float:
     return float(face_areas_mm2(mesh.nodes_mm, mesh.faces)[mask].sum() / 100)
 
 
+def _superior_dict(mesh: BrainMesh, band: SuperiorBand) -> dict:
+    mask = mesh.superior_faces(band)
+    return {"width_mm": band.width_mm, "elevation_deg": band.elevation_deg,
+            "faces": int(mask.sum()), "area_cm2": float(_area(mesh, mask))}
+
+
 def _flap_dict(flap: Flap) -> dict:
     d = asdict(flap)
     d.pop("meta")
@@ -76,7 +83,7 @@ def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = Non
     boundary codes (1 base, 2 skull, 3 flap) use ``flap`` (default: none)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    names = mesh.boundary_names(flap)
+    names = mesh.boundary_names(flap, SuperiorBand())
     bcode = np.array([BOUNDARY_CODES[n] for n in names], dtype=np.int32)
     region = (2 * mesh.tissue.astype(np.int32) + mesh.side).astype(np.int32)
     mm = meshio.Mesh(
