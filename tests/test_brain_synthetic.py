@@ -116,8 +116,20 @@ def test_boundaries(synthetic_mesh) -> None:
 
 
 def test_to_ngsolve_volumes_and_boundaries(synthetic_mesh) -> None:
-    mesh = to_ngsolve(synthetic_mesh, flap="left")
-    assert set(mesh.GetBoundaries()) == {"base", "skull", "flap"}
+    from brainbulge.geometry.brain.boundaries import SuperiorBand, face_areas_mm2
+    from brainbulge.geometry.brain.export import brain_summary
+
+    band = SuperiorBand()
+    mesh = to_ngsolve(synthetic_mesh, flap="left", superior=band)
+    assert set(mesh.GetBoundaries()) == {"base", "superior", "skull", "flap"}
+    superior = ngs.Integrate(1, mesh, ngs.BND, definedon=mesh.Boundaries("superior")) / 100
+    # a 1 cm band over the vertex of this 12 cm long head (the left flap, a 12 cm one on a
+    # small head, takes part of it)
+    whole = brain_summary(synthetic_mesh)["superior"]["area_cm2"]
+    assert whole > 5 and 0 < superior < whole
+    names = synthetic_mesh.boundary_names("left", band)
+    areas = face_areas_mm2(synthetic_mesh.nodes_mm, synthetic_mesh.faces)
+    assert superior == pytest.approx(areas[names == "superior"].sum() / 100, rel=1e-9)
     regions = synthetic_mesh.region_volumes_ml()
     assert set(mesh.GetMaterials()) == set(regions)
     for name, vol_ml in regions.items():

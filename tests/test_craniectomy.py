@@ -8,7 +8,9 @@ on an unrotated grid, mid-sagittal plane x = 0) with the symmetric bifrontal fla
 - contact: penetration far below 0.01 mm; the skull's force is normal (frictionless);
 - outputs: every summary key and file, the same from a NIfTI label map given on the command
   line as from the template (slow: builds an ICBM152 mesh);
-- an intact skull (no flap) is reported as infeasible (exit 3).
+- an intact skull (no flap) is reported as infeasible (exit 3);
+- the superior band along the midline (fixed by default, the paper's Figure 6) does not move,
+  and the solution stays mirror-symmetric with it; with ``fix = "inferior"`` it slides.
 """
 
 from __future__ import annotations
@@ -36,6 +38,11 @@ SUMMARY_KEYS = [
     "brain_volume_ml", "max_pressure_kpa", "mean_pressure_mmhg", "edge_exclusion_mm",
     "p95_principal_strain", "p95_radial_stretch", "p05_radial_stretch", "p95_csf_principal_strain",
 ]
+#: the bifrontal flap of this small brain (depth 120 mm) removes the skull over its whole
+#: upper midline, so the fixed superior band (20 mm wide) is taken down to 30 deg below the
+#: centre's horizontal, where the midline lies below the flap's floor (17 nodes)
+SYMMETRIC = {"flap": "frontal", "steps": 2, "superior_elevation_deg": -30.0,
+             "superior_width_mm": 20.0}
 FILES = ["summary.json", "fields.vtu", "fields.npz", "sections.png", "run.toml", "status.json"]
 
 
@@ -66,9 +73,9 @@ def shifts(symmetric_brain, tmp_path_factory):
     out = {}
     for swell in ("both", "left", "right"):
         folder = tmp_path_factory.mktemp(swell)
-        out[swell] = run_brain(
-            {"flap": "frontal", "swell": swell, "steps": 2}, folder, brain_mesh=symmetric_brain
-        )
+        out[swell] = run_brain({**SYMMETRIC, "swell": swell}, folder,
+                               brain_mesh=symmetric_brain)
+        out[swell]["folder"] = folder
     return out
 
 
@@ -95,7 +102,7 @@ def test_a_looser_tolerance_stops_sooner_at_the_same_state(symmetric_brain, shif
     below it, and summary quantities that agree with the default (1e-9) run."""
     default = shifts["left"]
     assert default["final_residual"] <= 1e-9
-    s = run_brain({"flap": "frontal", "swell": "left", "steps": 2, "tolerance": 1e-4},
+    s = run_brain({**SYMMETRIC, "swell": "left", "tolerance": 1e-4},
                   tmp_path, brain_mesh=symmetric_brain)
     assert s["converged"] and s["final_residual"] <= 1e-4
     assert s["newton_iterations"] < default["newton_iterations"]
@@ -135,8 +142,10 @@ def test_cli_on_a_user_label_map(tmp_path) -> None:
     path = tmp_path / "seg.nii.gz"
     nib.save(nib.Nifti1Image(labels, affine), path)
     out = tmp_path / "run"
+    # the bifrontal flap: a 12 cm unilateral one covers half of this 12 cm long head, and
+    # the tissue wrapping around its rounded edge stalls Newton at Js ~1.085
     rc = cli_main(["brain", "--labels", str(path), "--label-map", "freesurfer", "--tets", "5000",
-                   "--flap", "left", "--swell", "left", "--steps", "2", "--out", str(out)])
+                   "--flap", "frontal", "--swell", "left", "--steps", "2", "--out", str(out)])
     assert rc == 0
     summary = _check_outputs(out)
     assert summary["converged"]
@@ -216,7 +225,7 @@ def test_fibre_image_directions(tmp_path) -> None:
 
 def test_fibres_change_lambda_n(symmetric_brain, shifts, tmp_path) -> None:
     path = _vector_image(tmp_path, lambda X: np.broadcast_to([0.0, 0.0, 1.0], X.shape).copy())
-    s = run_brain({"flap": "frontal", "swell": "left", "steps": 2, "fibres": path},
+    s = run_brain({**SYMMETRIC, "swell": "left", "fibres": path},
                   tmp_path / "run", brain_mesh=symmetric_brain)
     d = np.load(tmp_path / "run" / "fields.npz")
     # with vertical fibres lambda_n is the vertical stretch of the vertex-averaged F
@@ -285,7 +294,7 @@ def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_pat
     image = tissue_image_from_labels(*symmetric_labels(), "freesurfer")
     coarse = build_brain_mesh(image, target_tets=2000, midsagittal=MidSagittalPlane())
     assert len(coarse.tets) < 0.6 * len(symmetric_brain.tets)
-    s = run_brain({"flap": "frontal", "swell": "left", "steps": 2}, tmp_path,
+    s = run_brain({**SYMMETRIC, "swell": "left"}, tmp_path,
                   brain_mesh=symmetric_brain, coarse_brain_mesh=coarse)
     ramp = shifts["left"]
     seq = s["mesh_sequencing"]
@@ -338,3 +347,65 @@ def test_refine_is_refused_next_to_a_given_mesh(tmp_path) -> None:
     mesh.write_bytes(b"")  # only its existence is checked here
     with pytest.raises(InputError, match="applies to a mesh built here"):
         CraniectomyCase(mesh=str(mesh), refine=1)
+
+
+def _superior_node_displacements(bm, folder) -> np.ndarray:
+    """``|u|`` (mm) at the nodes of the default superior band's faces left by the frontal
+    flap, read back from ``fields.npz``."""
+    from scipy.spatial import cKDTree
+
+    from brainbulge.geometry.brain.boundaries import SuperiorBand
+
+    names = bm.boundary_names("frontal", SuperiorBand(
+        SYMMETRIC["superior_width_mm"], SYMMETRIC["superior_elevation_deg"]))
+    nodes = bm.nodes_mm[np.unique(bm.faces[names == "superior"])]
+    assert len(nodes) >= 10
+    d = np.load(folder / "fields.npz")
+    dist, idx = cKDTree(d["points"]).query(nodes)
+    assert dist.max() < 1e-9
+    return np.linalg.norm(d["point_u"][idx], axis=1)
+
+
+def test_the_superior_band_does_not_move(symmetric_brain, shifts) -> None:
+    """Fixed by default: the band's nodes stay put to round-off in every scenario (the
+    mirror symmetry of the midline shifts, with the band fixed, is checked above)."""
+    for s in shifts.values():
+        assert s["inputs"]["fix"] == "inferior+superior"
+        assert _superior_node_displacements(symmetric_brain, s["folder"]).max() < 1e-12
+
+
+def test_without_the_superior_band_the_midline_slides(symmetric_brain, shifts,
+                                                     tmp_path) -> None:
+    s = run_brain({**SYMMETRIC, "swell": "left", "fix": "inferior"},
+                  tmp_path, brain_mesh=symmetric_brain)
+    assert s["converged"]
+    assert _superior_node_displacements(symmetric_brain, tmp_path).max() > 0.05
+    assert s["midline_shift_mm"] != pytest.approx(shifts["left"]["midline_shift_mm"], rel=5e-3)
+
+
+def test_a_flap_over_the_superior_band_wins_with_a_warning(symmetric_brain, caplog) -> None:
+    from brainbulge.geometry.brain.boundaries import SuperiorBand
+
+    band = SuperiorBand(SYMMETRIC["superior_width_mm"], SYMMETRIC["superior_elevation_deg"])
+    names = symmetric_brain.boundary_names("frontal", band)
+    crossed = symmetric_brain.superior_faces(band) & symmetric_brain.flap_faces["frontal"]
+    assert crossed.any() and np.all(names[crossed] == "flap")
+    assert "crosses the fixed superior band" in caplog.text
+    assert (names == "superior").any()
+    assert not (symmetric_brain.boundary_names("frontal") == "superior").any()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"fix": "superior"}, "unknown fixation"),
+        ({"superior_width_mm": 0.0}, "band width"),
+        ({"superior_elevation_deg": 95.0}, "band elevation"),
+    ],
+)
+def test_fixation_inputs_are_checked(options, message) -> None:
+    from brainbulge.errors import InputError
+    from brainbulge.model.brain import CraniectomyCase
+
+    with pytest.raises(InputError, match=message):
+        CraniectomyCase(**options)

@@ -22,7 +22,12 @@ from brainbulge.cli import (
     require,
     start_run,
 )
-from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
+from brainbulge.geometry.brain.defaults import (
+    EDGE_RADIUS_MM,
+    FIXATIONS,
+    SUPERIOR_ELEVATION_DEG,
+    SUPERIOR_WIDTH_MM,
+)
 
 
 def add_parser(sub: Any) -> None:
@@ -73,7 +78,17 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--edge-exclusion", type=float, default=5.0,
                    help="band around the flap rim left out of max_*/min_* [mm]")
     p.add_argument("--skull-edge-radius", type=float, default=EDGE_RADIUS_MM,
-                   help="rounding radius of the skull's cut edge [mm]")
+                   help="rounding radius of the skull's cut edge, in the bone outside the "
+                   f"opening [mm] (default {EDGE_RADIUS_MM:g})")
+    p.add_argument("--fix", choices=FIXATIONS, default="inferior+superior",
+                   help="fixed part of the outer surface: the inferior surface, or that and "
+                   "the band along the superior midline (the paper's Figure 6; default)")
+    p.add_argument("--superior-width", type=float, default=SUPERIOR_WIDTH_MM,
+                   help="width of the fixed superior band across the mid-sagittal plane [mm] "
+                   f"(default {SUPERIOR_WIDTH_MM:g}: the superior sagittal sinus)")
+    p.add_argument("--superior-elevation", type=float, default=SUPERIOR_ELEVATION_DEG,
+                   help="the superior band covers the midline above this elevation seen from "
+                   f"the brain centre [deg] (default {SUPERIOR_ELEVATION_DEG:g})")
     add_output_options(p, "brain-out")
     p.set_defaults(func=run_command)
 
@@ -98,6 +113,9 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "material": args.material,
         "edge_exclusion_mm": args.edge_exclusion,
         "edge_radius_mm": args.skull_edge_radius,
+        "fix": args.fix,
+        "superior_width_mm": args.superior_width,
+        "superior_elevation_deg": args.superior_elevation,
         "coarse_tets": args.coarse_tets,
         "coarse_mesh": args.coarse_mesh,
         "refine": args.refine,

@@ -4,10 +4,14 @@ The labelled brain mesh (:mod:`brainbulge.geometry.brain`, lengths in mm) carrie
 ``"{tissue}_{side}"`` (gray, white, csf, cerebellum, brainstem; left, right). Every region is
 an incompressible Mooney-Rivlin solid with the parameters of MODEL.md section 2 (the
 brainstem, absent from the paper's table, takes the cerebellum's), bonded to its neighbours.
-The inferior surface ``base`` is fixed; the rest of the outer surface, ``skull``, slides
-without friction on the rigid skull (:class:`RigidSkull`, evaluated at the deformed position);
-the ``flap`` is traction-free. White matter swells, ``Js: 1 -> swelling``, in the left
-hemisphere, the right, or both.
+The inferior surface ``base`` is fixed, and with ``fix = "inferior+superior"`` (default,
+the paper's Figure 6) also the ``superior`` band of the outer CSF surface along the superior
+midline (:class:`~brainbulge.geometry.brain.boundaries.SuperiorBand`); the rest of the outer
+surface, ``skull``, slides without friction on the rigid skull (:class:`RigidSkull`,
+evaluated at the deformed position); the ``flap`` is traction-free where it does not touch
+the bone (in contact with the same skull, whose rounded cut edge overhangs the opening's rim;
+a flap that crosses the superior band wins there). White matter swells, ``Js: 1 ->
+swelling``, in the left hemisphere, the right, or both.
 """
 
 from __future__ import annotations
@@ -19,6 +23,12 @@ import numpy as np
 
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain import BrainMesh, to_ngsolve
+from brainbulge.geometry.brain.boundaries import SuperiorBand
+from brainbulge.geometry.brain.defaults import (
+    FIXATIONS,
+    SUPERIOR_ELEVATION_DEG,
+    SUPERIOR_WIDTH_MM,
+)
 from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
 from brainbulge.materials import MooneyRivlin, preset
 from brainbulge.model.problem import Contact, Problem
@@ -62,6 +72,10 @@ class CraniectomyCase:
         compile: compile the energy to machine code (a one-off ~10 s; assembly ~3.5x faster).
         edge_radius_mm: radius of the rounded cut edge of the skull at the flap [mm].
         edge_exclusion_mm: band around the flap rim left out of ``max_*`` outputs [mm].
+        fix: the fixed part of the outer surface: ``inferior`` (the base) or
+            ``inferior+superior`` (and the band along the superior midline).
+        superior_width_mm, superior_elevation_deg: the superior band's width across the
+            mid-sagittal plane [mm] and its lowest elevation seen from the brain centre [deg].
         coarse_tets: mesh sequencing (:mod:`brainbulge.solver.sequencing`): ramp the load
             first on a mesh of about this many tets of the same geometry, then start the fine
             mesh's Newton at full load from its solution (MINI only; fewer fine iterations).
@@ -92,6 +106,9 @@ class CraniectomyCase:
     compile: bool = True
     edge_radius_mm: float = EDGE_RADIUS_MM
     edge_exclusion_mm: float = 5.0
+    fix: str = "inferior+superior"
+    superior_width_mm: float = SUPERIOR_WIDTH_MM
+    superior_elevation_deg: float = SUPERIOR_ELEVATION_DEG
     coarse_tets: int | None = None
     coarse_mesh: str | None = None
     refine: int = 0
@@ -124,6 +141,10 @@ class CraniectomyCase:
             raise InputError(f"edge radius {self.edge_radius_mm} mm must lie in (0, 10]")
         if not 0 <= self.edge_exclusion_mm <= 50:
             raise InputError(f"edge exclusion {self.edge_exclusion_mm} mm must lie in [0, 50]")
+        if self.fix not in FIXATIONS:
+            raise InputError(f"unknown fixation {self.fix!r}; choose one of "
+                             f"{', '.join(FIXATIONS)}")
+        self.superior_band()  # a bad width or elevation fails here
         if self.mesh is not None and not Path(self.mesh).exists():
             raise InputError(f"brain mesh {self.mesh} does not exist; build one with "
                              "`brainbulge mesh --out DIR` and pass DIR/brain.npz")
@@ -147,6 +168,11 @@ class CraniectomyCase:
             raise InputError(f"fibre image {self.fibres} does not exist")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
+
+    def superior_band(self) -> SuperiorBand | None:
+        """The fixed superior band, or None with ``fix = "inferior"``."""
+        band = SuperiorBand(self.superior_width_mm, self.superior_elevation_deg)
+        return band if self.fix == "inferior+superior" else None
 
     def _check_sequencing(self) -> None:
         if self.coarse_tets is None and self.coarse_mesh is None:
@@ -215,7 +241,8 @@ def tissue_materials(material: str) -> dict[str, MooneyRivlin]:
 def brain_problem(bm: BrainMesh, case: CraniectomyCase) -> Problem:
     """The NGSolve problem of ``case`` on the brain mesh ``bm``."""
     flap = None if case.flap == "none" else case.flap
-    mesh = to_ngsolve(bm, flap=flap)
+    band = case.superior_band()
+    mesh = to_ngsolve(bm, flap=flap, superior=band)
     by_tissue = tissue_materials(case.material)
     materials = {}
     for region in set(mesh.GetMaterials()):
@@ -231,7 +258,11 @@ def brain_problem(bm: BrainMesh, case: CraniectomyCase) -> Problem:
     if not swelling:
         raise InputError("the mesh has no white matter on the swelling side; check the labels")
     skull = bm.skull(flap, edge_radius_mm=case.edge_radius_mm)
-    return Problem(mesh, materials, swelling, clamped="base", contacts=[Contact("skull", skull)])
+    clamped = "base" if band is None else "base|superior"
+    # the flap is traction-free but may not pass into the bone: its rounded cut edge lies
+    # over the opening's rim (up to edge_radius_mm inside the cutter)
+    return Problem(mesh, materials, swelling, clamped=clamped,
+                   contacts=[Contact("skull|flap", skull)])
 
 
 def white_matter_volume_ml(bm: BrainMesh, sides: tuple[str, ...]) -> float:

@@ -34,6 +34,7 @@ mesh-convergent measures (docs/outputs.md).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 from pathlib import Path
@@ -220,7 +221,8 @@ def brain_summary(
     out["brain_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets)
     out["deformed_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets, u)
     out["swelling_volume_ml"] = out.pop("swelling_volume") / 1000.0
-    out["flap_area_cm2"] = bm.flap_area_cm2(case.flap)
+    out["flap_nominal_area_cm2"] = bm.flap_area_cm2(case.flap)
+    out["flap_area_cm2"] = bm.free_area_cm2(case.flap, case.edge_radius_mm)
     out["max_hydrostatic_stress_kpa"] = out.pop("max_pressure")
     out["min_hydrostatic_stress_kpa"] = out.pop("min_pressure")
     out["max_penetration_mm"] = out["max_penetration"]
@@ -273,10 +275,21 @@ def craniectomy_scenarios(**common: Any) -> list[dict[str, Any]]:
 
 
 def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
-    """Runner task: one 3D scenario (``name`` is the folder, the rest the case)."""
+    """Runner task: one 3D scenario (``name`` is the folder, the rest the case). The
+    scenarios of a study share their meshes: a worker reads each ``brain.npz`` once."""
     config = dict(scenario)
-    summary = run_brain(config, scenario_dir)
+    meshes = {key: _cached_brain_mesh(str(config[key])) if config.get(key) else None
+              for key in ("mesh", "coarse_mesh")}
+    summary = run_brain(config, scenario_dir, brain_mesh=meshes["mesh"],
+                        coarse_brain_mesh=meshes["coarse_mesh"])
     return {k: v for k, v in summary.items() if k != "inputs"}
+
+
+@functools.lru_cache(maxsize=2)
+def _cached_brain_mesh(path: str) -> BrainMesh:
+    from brainbulge.geometry.brain import load_brain_mesh
+
+    return load_brain_mesh(path)
 
 
 #: summary keys of the comparison table and figure (label, unit)
@@ -291,15 +304,19 @@ COMPARISON = {
 }
 
 
-def prepare_study_mesh(out_dir: Path, common: dict[str, Any]) -> Path:
-    """Build the study's brain mesh once (``out_dir/mesh/brain.npz``); reuse it on resume."""
+#: the scenario options that shape the mesh (fixed by ``mesh`` once it is built)
+MESH_OPTIONS = ("tets", "labels", "label_map", "brain_volume_ml", "flap_centre_mm",
+                "flap_diameter_mm", "refine")
+
+
+def prepare_study_mesh(out_dir: Path, common: dict[str, Any], folder: str = "mesh") -> Path:
+    """Build the study's brain mesh once (``out_dir/folder/brain.npz``); reuse it on resume."""
     from brainbulge.geometry.brain import save_brain_mesh
 
-    path = Path(out_dir) / "mesh" / "brain.npz"
+    path = Path(out_dir) / folder / "brain.npz"
     if common.get("mesh"):
         return Path(common["mesh"])
-    keys = ("tets", "labels", "label_map", "brain_volume_ml", "flap_centre_mm",
-            "flap_diameter_mm", "refine")
+    keys = MESH_OPTIONS
     spec = {k: common.get(k) for k in keys}
     spec["refine"] = spec["refine"] or None  # 0 and absent alike: a mesh made before --refine
     spec = json.loads(json.dumps(spec))  # tuples -> lists, as read back
@@ -312,10 +329,40 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any]) -> Path:
                 "resume with the same mesh options or pass --overwrite"
             )
         return path
-    case = case_from_dict({k: v for k, v in common.items() if k != "mesh"})
+    case = case_from_dict({k: v for k, v in common.items()
+                           if k not in ("mesh", "coarse_tets", "coarse_mesh")})
     save_brain_mesh(brain_mesh_for(case), path.parent)
     spec_path.write_text(json.dumps(spec))
     return path
+
+
+def attach_study_meshes(out_dir: Path, scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The scenarios with the study's shared meshes attached: ``mesh`` (built once from the
+    first scenario's mesh options, which are then dropped) and, for mesh sequencing with
+    ``coarse_tets``, ``coarse_mesh`` (built once at that size, unrefined: with ``coarse_tets =
+    tets / 8**refine`` the Netgen mesh that the fine one refines)."""
+    common = scenarios[0]
+    mesh = prepare_study_mesh(out_dir, common)
+    shared: dict[str, Any] = {"mesh": str(mesh)}
+    if common.get("coarse_tets") and not common.get("mesh"):
+        coarse = {**common, "tets": common["coarse_tets"], "refine": 0}
+        shared["coarse_mesh"] = str(prepare_study_mesh(out_dir, coarse, "coarse-mesh"))
+    drop = (*MESH_OPTIONS, "coarse_tets")
+    return [{**{k: v for k, v in sc.items() if k not in drop}, **shared} for sc in scenarios]
+
+
+def run_study_with_report(out_dir: Path, scenarios: list[dict[str, Any]],
+                          scheduler: str | None = None, workers: int | None = None) -> int:
+    """Run the scenarios on their shared meshes (:func:`attach_study_meshes`), then write
+    ``table.csv``, ``comparison.png`` and ``report.md``; return how many completed."""
+    from brainbulge.studies.runner import run_study
+
+    scenarios = attach_study_meshes(out_dir, scenarios)
+    rows = run_study(scenarios, "brainbulge.studies.craniectomy:study_task", out_dir,
+                     scheduler=scheduler, n_workers=workers)
+    write_comparison(out_dir, scenarios, rows)
+    write_report(out_dir, scenarios, rows)
+    return sum(1 for r in rows if r.get("complete"))
 
 
 def write_comparison(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[Path]:

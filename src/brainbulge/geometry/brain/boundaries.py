@@ -1,8 +1,11 @@
-"""The outer surface of the brain mesh: fixed base, sliding skull contact and craniectomy flaps.
+"""The outer surface of the brain mesh: fixed base and superior band, sliding skull contact
+and craniectomy flaps.
 
 Faces of the outer surface whose centroid lies below the cut plane ``z = base_z_mm`` (world RAS,
-mm; default about foramen-magnum level) are the fixed ``base``; the rest slides on the ``skull``
-except on a flap, where the skull is removed. A :class:`Flap` is the part of the skull inside a
+mm; default about foramen-magnum level) are the fixed ``base``; a :class:`SuperiorBand` along
+the superior midline, where the falx and the superior sagittal sinus tie the brain to the
+skull, is fixed too (the paper's Figure 6); the rest slides on the ``skull`` except on a flap,
+where the skull is removed. A :class:`Flap` is the part of the skull inside a
 cylinder along the outward normal at the flap centre, of circular (``half_length_mm = 0``) or
 stadium cross-section (a disk of ``radius_mm`` swept over ``2 half_length_mm`` along
 ``long_axis``): the rigid-skull obstacle (:mod:`.skull`) uses the same cylinder as its cutter,
@@ -16,6 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from brainbulge.errors import InputError
+from brainbulge.geometry.brain.defaults import (
+    SUPERIOR_ELEVATION_DEG,
+    SUPERIOR_WIDTH_MM,
+)
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
 
 # outward faces of a positively oriented tet (a, b, c, d): opposite d, c, b, a
@@ -34,6 +41,31 @@ FRONTAL_DEPTH_MM = 120.0
 #: The bifrontal flap's lower edge: this fraction of the height above the lowest point
 #: (z = -19 mm in MNI space, above the orbital roofs).
 FRONTAL_FLOOR_FRACTION = 0.35
+
+
+@dataclass(frozen=True)
+class SuperiorBand:
+    """The outer surface within ``width_mm / 2`` of the mid-sagittal plane and at least
+    ``elevation_deg`` above the horizontal through the brain centre (seen from it)."""
+
+    width_mm: float = SUPERIOR_WIDTH_MM
+    elevation_deg: float = SUPERIOR_ELEVATION_DEG
+
+    def __post_init__(self) -> None:
+        if not 0 < self.width_mm <= 60:
+            raise InputError(f"superior band width {self.width_mm} mm must lie in (0, 60] "
+                             "(default 10: the superior sagittal sinus)")
+        if not -30 <= self.elevation_deg < 90:
+            raise InputError(f"superior band elevation {self.elevation_deg} deg must lie in "
+                             "[-30, 90)")
+
+    def contains(self, points_mm: np.ndarray, plane_point_mm, plane_normal,
+                 centre_mm: np.ndarray) -> np.ndarray:
+        """True for points (n, 3) in the band (mm)."""
+        off = (points_mm - np.asarray(plane_point_mm)) @ np.asarray(plane_normal, float)
+        d = points_mm - np.asarray(centre_mm)
+        elevation = np.degrees(np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1)))
+        return (np.abs(off) <= self.width_mm / 2) & (elevation >= self.elevation_deg)
 
 
 def boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

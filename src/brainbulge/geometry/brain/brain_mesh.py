@@ -17,6 +17,7 @@ from brainbulge.errors import InputError, MeshError
 from brainbulge.geometry.brain.boundaries import (
     UNILATERAL_DIAMETER_MM,
     Flap,
+    SuperiorBand,
     boundary_faces,
     custom_flap,
     face_areas_mm2,
@@ -40,6 +41,10 @@ log = logging.getLogger("brainbulge")
 #: Fraction of the envelope's inferior-superior extent below the default base cut plane:
 #: 0.12 puts it at z = -54 mm in MNI space, about the foramen magnum.
 BASE_FRACTION = 0.12
+#: A face is left free by the skull where the skull with the flap is this much farther from
+#: its centroid than the intact skull (mm): well below the mesh's chord heights, above the
+#: spline's round-off.
+FREE_GAP_MM = 0.01
 
 
 @dataclass
@@ -91,16 +96,46 @@ class BrainMesh:
         return {str(n): float(vol[names == n].sum() / 1000) for n in np.unique(names)}
 
     def flap_area_cm2(self, name: str) -> float:
-        """Area of a flap on the outer surface (cm^2)."""
+        """Nominal area of a flap (cm^2): the outer faces whose centroid lies inside its
+        cutter, the flap as specified."""
         area = face_areas_mm2(self.nodes_mm, self.faces)
         return float(area[self.flap_faces[name]].sum() / 100)
 
-    def boundary_names(self, flap: str | None = None) -> np.ndarray:
-        """``"base"``, ``"skull"`` or ``"flap"`` for each outer face, for the given flap."""
-        names = np.where(self.base, "base", "skull").astype("<U5")
+    def free_area_cm2(self, name: str, edge_radius_mm: float = EDGE_RADIUS_MM) -> float:
+        """Area of the outer surface the skull leaves free with flap ``name`` open (cm^2):
+        the flap's faces, and the faces (base excluded) where the skull with the flap and its
+        rounded cut edge lies more than :data:`FREE_GAP_MM` farther from the centroid than the
+        intact skull does. With the rounding in the bone it matches :meth:`flap_area_cm2`."""
+        area = face_areas_mm2(self.nodes_mm, self.faces)
+        centroids = self.nodes_mm[self.faces].mean(axis=1)
+        skull = self.skull(name, edge_radius_mm)
+        phi_env, _ = skull.envelope_distance(centroids, gradient=False)
+        phi, _ = skull.signed_distance(centroids, gradient=False)
+        free = self.flap_faces[name] | ((phi_env - phi > FREE_GAP_MM) & ~self.base)
+        return float(area[free].sum() / 100)
+
+    def boundary_names(self, flap: str | None = None,
+                       superior: SuperiorBand | None = None) -> np.ndarray:
+        """``"base"``, ``"superior"``, ``"skull"`` or ``"flap"`` for each outer face, for the
+        given flap and fixed superior band (``None``: none). A flap that crosses the band
+        wins (the skull there is removed), with a warning."""
+        names = np.where(self.base, "base", "skull").astype("<U8")
+        if superior is not None:
+            names[self.superior_faces(superior)] = "superior"
         if flap is not None:
-            names[self._flap_mask(flap)] = "flap"
+            mask = self._flap_mask(flap)
+            crossed = mask & (names == "superior")
+            if crossed.any():
+                log.warning("flap %r crosses the fixed superior band: %d of its faces are "
+                            "traction-free, not fixed", flap, int(crossed.sum()))
+            names[mask] = "flap"
         return names
+
+    def superior_faces(self, band: SuperiorBand) -> np.ndarray:
+        """Mask of the outer faces (base excluded) in the superior ``band``."""
+        centroids = self.nodes_mm[self.faces].mean(axis=1)
+        return band.contains(centroids, self.midsagittal.point_mm, self.midsagittal.normal,
+                             self.envelope.centre_mm()) & ~self.base
 
     def _flap_mask(self, flap: str) -> np.ndarray:
         if flap not in self.flap_faces:

@@ -11,8 +11,9 @@ import meshio
 import numpy as np
 
 from brainbulge.errors import InputError
-from brainbulge.geometry.brain.boundaries import Flap
+from brainbulge.geometry.brain.boundaries import Flap, SuperiorBand
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
+from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
 from brainbulge.geometry.brain.labels import TISSUES
 from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane
@@ -20,11 +21,13 @@ from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane
 log = logging.getLogger("brainbulge")
 
 #: Boundary codes in the VTU/XDMF files (cell data ``boundary`` on triangles).
-BOUNDARY_CODES = {"base": 1, "skull": 2, "flap": 3}
+BOUNDARY_CODES = {"base": 1, "skull": 2, "flap": 3, "superior": 4}
 
 
 def brain_summary(mesh: BrainMesh) -> dict:
-    """The content of ``mesh.json``: sizes, volumes (ml), quality, flap areas (cm^2)."""
+    """The content of ``mesh.json``: sizes, volumes (ml), quality, flap areas (cm^2: the
+    nominal flap, and the surface the skull leaves free with the default rounding of its
+    cut edge)."""
     mesh_vol = mesh.tissue_volumes_ml()
     return {
         "units": {"length": "mm", "volume": "ml", "area": "cm^2"},
@@ -45,8 +48,11 @@ def brain_summary(mesh: BrainMesh) -> dict:
         "quality": mesh.quality(),
         "base": {"cut_plane_z_mm": mesh.base_z_mm, "faces": int(mesh.base.sum()),
                  "area_cm2": float(_area(mesh, mesh.base))},
-        "flaps": {name: {"area_cm2": mesh.flap_area_cm2(name), "faces":
-                         int(mesh.flap_faces[name].sum()), **_flap_dict(f)}
+        "superior": _superior_dict(mesh, SuperiorBand()),
+        "flaps": {name: {"flap_nominal_area_cm2": mesh.flap_area_cm2(name),
+                         "flap_area_cm2": mesh.free_area_cm2(name),
+                         "edge_radius_mm": EDGE_RADIUS_MM,
+                         "faces": int(mesh.flap_faces[name].sum()), **_flap_dict(f)}
                   for name, f in mesh.flaps.items()},
         "timings_s": mesh.timings_s,
     }
@@ -56,6 +62,12 @@ def _area(mesh: BrainMesh, mask: np.ndarray) -> float:
     from brainbulge.geometry.brain.boundaries import face_areas_mm2
 
     return float(face_areas_mm2(mesh.nodes_mm, mesh.faces)[mask].sum() / 100)
+
+
+def _superior_dict(mesh: BrainMesh, band: SuperiorBand) -> dict:
+    mask = mesh.superior_faces(band)
+    return {"width_mm": band.width_mm, "elevation_deg": band.elevation_deg,
+            "faces": int(mask.sum()), "area_cm2": float(_area(mesh, mask))}
 
 
 def _flap_dict(flap: Flap) -> dict:
@@ -71,7 +83,7 @@ def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = Non
     boundary codes (1 base, 2 skull, 3 flap) use ``flap`` (default: none)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    names = mesh.boundary_names(flap)
+    names = mesh.boundary_names(flap, SuperiorBand())
     bcode = np.array([BOUNDARY_CODES[n] for n in names], dtype=np.int32)
     region = (2 * mesh.tissue.astype(np.int32) + mesh.side).astype(np.int32)
     mm = meshio.Mesh(

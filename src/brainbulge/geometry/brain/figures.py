@@ -11,12 +11,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
+from brainbulge.geometry.brain.boundaries import SuperiorBand  # noqa: E402
 from brainbulge.geometry.brain.brain_mesh import BrainMesh  # noqa: E402
 from brainbulge.geometry.brain.labels import TISSUES  # noqa: E402
 
 _TISSUE_COLOURS = {"gray": "#9e9e9e", "white": "#f5f0dc", "csf": "#4f8fd6",
                    "cerebellum": "#c77d3b", "brainstem": "#8a4f9e"}
-_BC_COLOURS = {"base": "#d62728", "skull": "#bdbdbd", "flap": "#2ca02c"}
+_BC_COLOURS = {"base": "#d62728", "superior": "#ff7f0e", "skull": "#bdbdbd", "flap": "#2ca02c"}
+#: the default fixed superior band, shown in the boundary figure
+DEFAULT_SUPERIOR = SuperiorBand()
+_BC_LABELS = {"base": "base (fixed)", "superior": "superior (fixed)",
+              "skull": "skull (sliding)", "flap": "flap (traction-free)"}
 
 
 def plot_sections(mesh: BrainMesh, path: str | Path, centre_mm: np.ndarray | None = None,
@@ -65,16 +70,19 @@ def plot_sections(mesh: BrainMesh, path: str | Path, centre_mm: np.ndarray | Non
     return Path(path)
 
 
-def plot_boundaries(mesh: BrainMesh, path: str | Path, flaps: list[str] | None = None) -> Path:
-    """Outer surface coloured fixed base / sliding skull / flap, one row per flap, four views."""
+def plot_boundaries(mesh: BrainMesh, path: str | Path, flaps: list[str] | None = None,
+                    superior: SuperiorBand | None = DEFAULT_SUPERIOR) -> Path:
+    """Outer surface coloured fixed base / fixed superior band / sliding skull / flap, one row
+    per flap, five views."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     flaps = list(mesh.flaps) if flaps is None else flaps
-    views = [(10, 180, "left"), (10, 0, "right"), (10, 90, "front"), (-60, 90, "below")]
+    views = [(10, 180, "left"), (10, 0, "right"), (10, 90, "front"), (80, 90, "above"),
+             (-60, 90, "below")]
     fig = plt.figure(figsize=(4 * len(views), 4 * len(flaps)))
     tri = mesh.nodes_mm[mesh.faces]
     for row, flap in enumerate(flaps):
-        names = mesh.boundary_names(flap)
+        names = mesh.boundary_names(flap, superior)
         colour = np.array([matplotlib.colors.to_rgb(_BC_COLOURS[n]) for n in names])
         normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         normal /= np.linalg.norm(normal, axis=1)[:, None]
@@ -96,8 +104,9 @@ def plot_boundaries(mesh: BrainMesh, path: str | Path, flaps: list[str] | None =
             ax.view_init(elev, azim)
             ax.set_axis_off()
             ax.set_title(f"flap '{flap}' ({mesh.flap_area_cm2(flap):.0f} cm²), {label}")
-    handles = [matplotlib.patches.Patch(color=c, label=f"{n}") for n, c in _BC_COLOURS.items()]
-    fig.legend(handles=handles, loc="lower center", ncol=3)
+    handles = [matplotlib.patches.Patch(color=c, label=_BC_LABELS[n])
+               for n, c in _BC_COLOURS.items() if superior is not None or n != "superior"]
+    fig.legend(handles=handles, loc="lower center", ncol=4)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     fig.savefig(path, dpi=80)
     plt.close(fig)

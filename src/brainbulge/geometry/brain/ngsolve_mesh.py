@@ -1,20 +1,24 @@
 """The brain mesh as an NGSolve mesh (mm): materials ``"{tissue}_{side}"``, boundaries
-``"base"``, ``"skull"``, ``"flap"``."""
+``"base"``, ``"superior"``, ``"skull"``, ``"flap"``."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from brainbulge.geometry.brain.boundaries import SuperiorBand
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
 
-BOUNDARY_NAMES = ("base", "skull", "flap")
+BOUNDARY_NAMES = ("base", "superior", "skull", "flap")
 
 
-def to_ngsolve(brain_mesh: BrainMesh, flap: str | None = None):
-    """Build an ``ngsolve.Mesh`` of ``brain_mesh`` with the given flap open (``None``: intact).
+def to_ngsolve(brain_mesh: BrainMesh, flap: str | None = None,
+               superior: SuperiorBand | None = None):
+    """Build an ``ngsolve.Mesh`` of ``brain_mesh`` with the given flap open (``None``: intact)
+    and the faces of the ``superior`` band (``None``: none) named ``"superior"``.
 
     Materials are ``"{tissue}_{side}"`` (e.g. ``"white_left"``); boundary names exactly
-    ``"base"``, ``"skull"`` and ``"flap"`` (a name with no faces is still declared).
+    ``"base"``, ``"superior"``, ``"skull"`` and ``"flap"`` (a name with no faces is still
+    declared).
     """
     import netgen.meshing as nm
     import ngsolve
@@ -32,7 +36,7 @@ def to_ngsolve(brain_mesh: BrainMesh, flap: str | None = None):
     # one face descriptor per (boundary name, region of the owning tet): NGSolve takes the
     # region next to a boundary face from its descriptor, and a space defined on one region
     # (the pressure of a zone) would otherwise pick up every boundary vertex
-    bnames = brain_mesh.boundary_names(flap)
+    bnames = brain_mesh.boundary_names(flap, superior)
     faces = np.ascontiguousarray(brain_mesh.faces, dtype=np.int32)  # outward normals
     face_mat = mat_index[brain_mesh.face_tet]
     fd = 0

@@ -2,15 +2,21 @@
 
 ``phi(x) > 0`` is penetration into the skull (mm), ``phi < 0`` is inside the intracranial space.
 Without a flap ``phi`` is the envelope's smoothed signed distance (cubic-spline interpolated on
-its grid, gradient by central differences of the same spline). With a flap, the skull solid
-``{phi_env > 0}`` is intersected with the outside of the flap's cutting cylinder, and the convex
-cut edge is rounded with radius ``edge_radius_mm`` (the SDF of the intersection eroded and
-dilated by that radius):
+its grid, gradient by central differences of the same spline). With a flap the skull is removed
+inside the flap's cutting cylinder, and the cut edge is rounded with radius
+``r = edge_radius_mm`` *in the bone*, as :class:`~brainbulge.geometry.sphere_skull.SphericalSkull`:
+the skull is the set of points within ``r`` of a core, the bone at least ``r`` beyond the
+inner surface and outside the cutter,
 
-    u = (d_skull + r, d_cut + r),   d = |max(u, 0)| + min(max(u), 0) - r,   phi = -d
+    u = (d_skull + r, -d_cut),   d_core = |max(u, 0)| + min(max(u), 0),   d = d_core - r,
+    phi = -d
 
-with ``d_skull = -phi_env`` and ``d_cut = -(distance to the cylinder)`` the standard (negative
-inside) distances of the two sets.
+with ``d_skull = -phi_env`` and ``d_cut`` the cutter's distance (negative inside). Outside
+the cutter ``d = d_skull`` exactly: the skull's inner surface ends at the nominal rim, where a
+torus of radius ``r`` takes over, tangent to it, and curves outward (gap ``sqrt(r^2 +
+d_cut^2) - r ~ d_cut^2 / (2 r)`` on the inner surface inside the rim); deep in the bone the
+cut face lies ``r`` inside the cylinder. The opening on the skull's inner surface is the
+nominal flap for every ``r``.
 """
 
 from __future__ import annotations
@@ -81,8 +87,9 @@ class RigidSkull:
             return phi_env, g_env
         r = self.edge_radius_mm
         d_cut, g_cut = self.flap.cutter_distance(pts)
-        # standard distances (negative inside) of the skull solid and of the cutter's outside
-        u = np.stack([-phi_env + r, -d_cut + r], axis=1)
+        # standard distances (negative inside) of the core: the bone r beyond the inner
+        # surface, and the cutter's outside
+        u = np.stack([-phi_env + r, -d_cut], axis=1)
         upos = np.maximum(u, 0.0)
         norm = np.linalg.norm(upos, axis=1)
         d = norm + np.minimum(u.max(axis=1), 0.0) - r
