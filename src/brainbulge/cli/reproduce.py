@@ -14,12 +14,12 @@ the performance work.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
 from brainbulge.cli.study import StudyIncomplete, incomplete_text, run_study_and_report
+from brainbulge.results.run_record import atomic_write_json
 
 
 def add_parser(sub: Any) -> None:
@@ -54,7 +54,7 @@ def run_command(args: argparse.Namespace) -> int:
     out_path = Path(args.out)
     resume = (out_path / "study.json").is_file() and not args.overwrite
     out = start_run(args, {"command": "reproduce", "tets": args.tets}, resume=resume)
-    (out / "study.json").write_text(json.dumps({"study": "reproduce", "parts": list(parts)}))
+    atomic_write_json(out / "study.json", {"study": "reproduce", "parts": list(parts)})
     names = {"sector": "hemidisk-sector", "disk": "hemidisk-disk", "craniectomy": "craniectomy"}
     failed, texts = 0, []
     for i, (part, scenarios) in enumerate(parts.items(), start=1):
