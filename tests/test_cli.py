@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -122,6 +123,12 @@ BAD = [
     (["study", "craniectomy", "--mesh", "{text_file}"], "not a brain.npz"),
     (["study", "hemidisk-sector", "--workers", "1000"], "workers"),
     (["demo", "--scheduler", "http//x"], "scheduler"),
+    (["study", "hemidisk-sector", "--scheduler", "tcp://127.0.0.1:{closed_port}"],
+     "no Dask scheduler reachable"),
+    (["demo", "--scheduler", "127.0.0.1:{closed_port}"], "no Dask scheduler reachable"),
+    (["reproduce", "--scheduler", "tcp://127.0.0.1:{closed_port}"],
+     "no Dask scheduler reachable"),
+    (["study", "hemidisk-sector", "--scheduler", "tcp://127.0.0.1:99999"], "[1, 65535]"),
     (["demo", "--workers", "0"], "workers"),
     (["study", "hemidisk-sector", "--out", "{run}"], "--overwrite"),
     (["study", "hemidisk-disk", "--out", "{study}"], "'hemidisk-sector'"),
@@ -198,6 +205,8 @@ def _expand(arg: str, tmp: Path) -> str:
     for key, name in names.items():
         arg = arg.replace(key, str(tmp / name))
     arg = arg.replace("{tmp}", str(tmp))
+    if "{closed_port}" in arg:
+        arg = arg.replace("{closed_port}", str(closed_port()))
     for kind, command in (("{toml:", "hemidisk"), ("{brain_toml:", "brain")):
         if arg.startswith(kind):
             path = tmp / "cfg" / f"{abs(hash(arg))}.toml"
@@ -205,6 +214,13 @@ def _expand(arg: str, tmp: Path) -> str:
             path.write_text(f"command = '{command}'\n[{command}]\n{arg[len(kind):-1]}\n")
             arg = str(path)
     return arg
+
+
+def closed_port() -> int:
+    """A local TCP port nothing listens on (bound, then released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def _tree(root: Path) -> dict[str, bytes]:
@@ -239,6 +255,21 @@ def test_bad_input_table(argv, message, workspace, capsys) -> None:
 
 def test_the_table_is_large() -> None:
     assert len(BAD) >= 60
+
+
+def test_a_listening_scheduler_address_passes_the_probe() -> None:
+    from brainbulge.cli import checks
+    from brainbulge.errors import InputError
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        checks.scheduler(f"tcp://127.0.0.1:{port}")
+        checks.scheduler(f"localhost:{port}")
+    with pytest.raises(InputError, match="refused"):
+        checks.scheduler(f"tcp://127.0.0.1:{port}")
+    checks.scheduler("inproc://127.0.0.1:1")  # in-process addresses are not probed
 
 
 def test_bad_toml(tmp_path, capsys) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+import socket
 import types
 import typing
 from pathlib import Path
@@ -38,6 +39,8 @@ TEMPLATE_TETS_MIN = 25_000
 FLAP_CENTRE_MM = 150.0
 #: Dask scheduler addresses: ``[protocol://]host:port``
 SCHEDULER = re.compile(r"((tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]*[A-Za-z0-9\]]:\d{1,5}")
+#: seconds a Dask scheduler has to accept a connection before a study is refused
+SCHEDULER_PROBE_S = 5.0
 
 
 # --------------------------------------------------------------------------- generic
@@ -219,10 +222,29 @@ def mesh_tets(tets: Any, refine: Any, template: bool) -> None:
 
 
 def scheduler(address: str | None) -> None:
-    """``None``, ``serial`` or a Dask address ``[tcp://]host:port``."""
+    """``None``, ``serial`` or a Dask address ``[tcp://]host:port`` at which something
+    accepts a connection within `SCHEDULER_PROBE_S` (tcp, tls, ws, wss; inproc and ucx
+    addresses are not probed)."""
     if address is None or address == "serial":
         return
     if not SCHEDULER.fullmatch(address):
         raise InputError(
             f"--scheduler {address!r} is not a Dask scheduler address; give one such as "
             "tcp://10.0.0.5:8786, 'serial', or leave it out for a local cluster")
+    protocol, _, rest = address.rpartition("://")
+    if protocol not in ("", "tcp", "tls", "ws", "wss"):
+        return
+    host, _, port = rest.rpartition(":")
+    if not 1 <= int(port) <= 65535:
+        raise InputError(f"--scheduler {address}: port {port} must lie in [1, 65535]; give the "
+                         "port the scheduler prints (8786 by default)")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), SCHEDULER_PROBE_S):
+            pass
+    except OSError as exc:
+        reason = (f"no answer in {SCHEDULER_PROBE_S:g} s" if isinstance(exc, TimeoutError)
+                  else exc.strerror or str(exc))
+        raise InputError(
+            f"--scheduler {address}: no Dask scheduler reachable there ({reason.lower()}); "
+            "start one (`dask scheduler`) or correct the address, or leave --scheduler out "
+            "for a local cluster") from None

@@ -36,9 +36,11 @@ def add_parser(sub: Any) -> None:
 
 
 def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
+    from brainbulge.cli import checks
     from brainbulge.studies import hemidisk as hd
     from brainbulge.studies.craniectomy import case_from_dict, craniectomy_scenarios
 
+    checks.scheduler(args.scheduler)
     brain = craniectomy_scenarios(tets=args.tets, brain_volume_ml=1108.0, steps=4)
     for sc in brain:
         case_from_dict(sc)  # validate before touching --out
