@@ -50,3 +50,69 @@ def test_the_cache_can_be_turned_off(monkeypatch: pytest.MonkeyPatch) -> None:
     path = os.environ["PATH"]
     assert compile_cache.use_compiler_cache() is False
     assert os.environ["PATH"] == path
+
+
+def test_ngscxx_is_found_next_to_the_interpreter(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With a ``PATH`` that lacks the environment's ``bin/``, ``ngscxx`` is still found (where
+    the ngsolve wheel installs it), and preparing to compile puts its folder first on
+    ``PATH``, so that the ``python3`` it calls is this interpreter's."""
+    from brainbulge.solver import compile_cache
+
+    folder = os.path.dirname(compile_cache.find_ngscxx() or "")
+    if folder not in compile_cache.interpreter_scripts():
+        pytest.skip("ngscxx is not installed next to this interpreter")
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    monkeypatch.setenv("BRAINBULGE_NO_CCACHE", "1")
+    monkeypatch.setattr(compile_cache, "_native", {})
+    assert compile_cache.native_compiler_ready() is True
+    assert os.environ["PATH"].split(os.pathsep)[0] == folder
+
+
+def test_no_compiler_is_said_once(monkeypatch: pytest.MonkeyPatch,
+                                  caplog: pytest.LogCaptureFixture, tmp_path: Path) -> None:
+    """Without ``ngscxx`` anywhere, one warning says so and what it costs; later calls
+    return False silently and ``PATH`` is left as it was."""
+    from brainbulge.solver import compile_cache
+
+    monkeypatch.setattr(compile_cache, "interpreter_scripts", lambda: [])
+    monkeypatch.setattr(compile_cache, "_native", {})
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with caplog.at_level("WARNING", logger="brainbulge"):
+        assert compile_cache.native_compiler_ready() is False
+        assert compile_cache.native_compiler_ready() is False
+    warnings = [r.getMessage() for r in caplog.records]
+    assert len(warnings) == 1
+    assert "ngscxx not found" in warnings[0] and "uncompiled" in warnings[0]
+    assert os.environ["PATH"] == str(tmp_path)
+
+
+def test_importing_the_solver_leaves_the_environment_alone() -> None:
+    code = ("import os; before = dict(os.environ); import brainbulge.solver.mixed, "
+            "brainbulge.studies.craniectomy; print(dict(os.environ) == before)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "True"
+
+
+def test_the_console_script_compiles_without_the_environment_on_path(tmp_path: Path) -> None:
+    """``bin/brainbulge`` run by its full path with ``PATH=/usr/bin:/bin`` (as pipx, a job
+    script or an IDE run it): the brain energy is compiled, no 'uncompiled' fallback."""
+    import sysconfig
+
+    from toy_brain import toy_mesh
+
+    script = Path(sysconfig.get_path("scripts")) / "brainbulge"
+    if not script.is_file():
+        pytest.skip("no brainbulge console script in this environment")
+    toy_mesh(tmp_path / "mesh")
+    env = {"HOME": os.environ.get("HOME", str(tmp_path)), "PATH": "/usr/bin:/bin",
+           "PYTHONPATH": os.environ.get("PYTHONPATH", "")}
+    if "XDG_CACHE_HOME" in os.environ:
+        env["XDG_CACHE_HOME"] = os.environ["XDG_CACHE_HOME"]
+    run = subprocess.run(
+        [str(script), "brain", "--mesh", str(tmp_path / "mesh" / "brain.npz"), "--flap",
+         "custom", "--swell", "left", "--steps", "1", "--swelling", "1.02", "--out",
+         str(tmp_path / "run")], env=env, capture_output=True, text=True, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "uncompiled" not in run.stderr and "not found" not in run.stderr, run.stderr[-2000:]
+    assert (tmp_path / "run" / "summary.json").is_file()

@@ -95,7 +95,8 @@ def test_rim_refinement_puts_small_elements_on_the_exclusion_circles() -> None:
 def test_extremes_converge_with_rim_refinement() -> None:
     """Mesh convergence of the ``max_*``/``min_*`` keys (docs/verification.md): the default
     mesh (rim size h/10) against one with corners and rims twice as fine agree within 2 % in
-    all six, where the same mesh without the rim refinement is 10 % off in the strain."""
+    all six; with the recovered gradient the same mesh without the rim refinement is 1.9 %
+    off in the strain (10 % from the raw element gradient)."""
     from brainbulge.results.summary import solution_summary
 
     keys = ("max_displacement", "max_radial_stretch", "min_radial_stretch",
@@ -115,7 +116,7 @@ def test_extremes_converge_with_rim_refinement() -> None:
     no_rim = summary(rim_mesh_size=0.05)
     for k in keys:
         assert default[k] == pytest.approx(fine[k], rel=0.02), k
-    assert abs(no_rim["max_principal_strain"] / fine["max_principal_strain"] - 1) > 0.05
+    assert abs(no_rim["max_principal_strain"] / fine["max_principal_strain"] - 1) < 0.03
 
 
 def test_skull_gap_function() -> None:

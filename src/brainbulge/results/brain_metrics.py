@@ -5,8 +5,11 @@ displacements ``u`` (n, 3) in mm; the deformed position is ``x = X + u`` and eac
 affinely (P1 geometry). No solver is needed, so these functions are tested on meshes with
 prescribed displacements.
 
-- :func:`midline_shift_mm`: largest lateral displacement of tissue that starts on the
-  mid-sagittal plane, signed (positive towards the patient's right, +x in RAS).
+- :func:`locate_monro` and :func:`monro_midline_shift_mm`: the clinical midline shift, the
+  lateral displacement of the mid-sagittal tissue at the level of the foramen of Monro
+  (the septum pellucidum), signed: positive towards the patient's right (+x in RAS).
+- :func:`midline_shift_mm`: the largest lateral displacement of any tissue that starts on the
+  mid-sagittal plane, at any height (``max_midline_displacement_mm``).
 - :func:`bulge_volume_ml`: tissue volume outside the intact skull in the deformed configuration.
 - :func:`brain_volume_ml`, :func:`swelling_volume_ml`, :func:`prescribed_swelling_volume_ml`.
 
@@ -16,6 +19,7 @@ prescribed displacements.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import cache
 from typing import TYPE_CHECKING
 
@@ -32,12 +36,165 @@ MM3_PER_ML = 1000.0
 # the ICBM152 template: midline, just behind the anterior commissure, ~12 mm above the AC-PC
 # line. Good to a few mm; only meaningful for meshes in MNI coordinates (the default template).
 MONRO_MNI_MM: tuple[float, float, float] = (0.0, -2.0, 12.0)
+#: bounding box (mm) of the ICBM152 template's intracranial mesh (1.5 mm CSF layer): a mesh
+#: whose box matches within ``TEMPLATE_BOX_TOL_MM`` on every side is in MNI coordinates
+TEMPLATE_BOX_MM: tuple[tuple[float, float, float], tuple[float, float, float]] = (
+    (-73.9, -108.8, -73.6), (73.9, 75.0, 83.4))
+TEMPLATE_BOX_TOL_MM = 3.0
+#: the ventricles as meshed: CSF deeper than ``VENTRICLE_DEPTH_MM`` inside the skull's inner
+#: surface and within ``VENTRICLE_MIDLINE_MM`` of the mid-sagittal plane, at least
+#: ``VENTRICLE_MIN_ML`` of it (sulci and the layer under the skull are shallower)
+VENTRICLE_DEPTH_MM = 15.0
+VENTRICLE_MIDLINE_MM = 25.0
+VENTRICLE_MIN_ML = 1.0
+#: the foramen of Monro minus the ventricles' centroid on the ICBM152 template (30k-tet mesh:
+#: centroid (0.5, -23.3, 10.3) mm, 40 ml): where the foramen sits relative to the ventricles
+TEMPLATE_MONRO_FROM_VENTRICLES_MM: tuple[float, float, float] = (0.0, 21.3, 1.7)
+#: half extents (mm) in the anterior-posterior (y) and inferior-superior (z) direction of the
+#: window on the mid-sagittal plane around the foramen where the shift is measured: the
+#: septum pellucidum at the foramen's level
+MONRO_WINDOW_MM: tuple[float, float] = (20.0, 5.0)
+
+
+@dataclass(frozen=True)
+class MonroLocation:
+    """Where the clinical midline shift is measured: ``point_mm`` (RAS, on the mid-sagittal
+    plane) and how it was found, ``source``: ``"template"`` (MNI coordinates of the ICBM152
+    template), ``"labels"`` (the segmentation's ventricles) or ``"bounding box"`` (the
+    template's location mapped by the brain's bounding box: a rough guess)."""
+
+    point_mm: tuple[float, float, float]
+    source: str
+
+
+def locate_monro(nodes_mm: np.ndarray, tets: np.ndarray, csf_tets: np.ndarray,
+                 depth_mm: np.ndarray, plane: MidSagittalPlane) -> MonroLocation:
+    """The foramen of Monro on a brain mesh.
+
+    - A mesh whose bounding box is the template's (``TEMPLATE_BOX_MM``): ``MONRO_MNI_MM``.
+    - Else, where the segmentation has ventricles (``csf_tets`` (bool per tet) deeper than
+      ``VENTRICLE_DEPTH_MM``, ``depth_mm`` per tet being the distance inside the skull's inner
+      surface, and within ``VENTRICLE_MIDLINE_MM`` of the plane): their volume centroid plus
+      the template's offset from its ventricles to its foramen, scaled per axis by the ratio
+      of the bounding boxes, projected onto the mid-sagittal plane.
+    - Else the template's location mapped affinely from the template's bounding box to this
+      mesh's, projected onto the plane (``source = "bounding box"``; the caller warns).
+    """
+    X = np.asarray(nodes_mm, dtype=float)
+    T = np.asarray(tets)
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    t_lo, t_hi = (np.asarray(b) for b in TEMPLATE_BOX_MM)
+    n = np.asarray(plane.normal, dtype=float)
+    n /= np.linalg.norm(n)
+    p0 = np.asarray(plane.point_mm, dtype=float)
+
+    def on_plane(x: np.ndarray) -> tuple[float, float, float]:
+        x = x - ((x - p0) @ n) * n
+        return (float(x[0]), float(x[1]), float(x[2]))
+
+    if np.all(np.abs(lo - t_lo) <= TEMPLATE_BOX_TOL_MM) and np.all(
+            np.abs(hi - t_hi) <= TEMPLATE_BOX_TOL_MM):
+        return MonroLocation(on_plane(np.asarray(MONRO_MNI_MM)), "template")
+    scale = (hi - lo) / (t_hi - t_lo)
+    centroids = X[T].mean(axis=1)
+    vent = (np.asarray(csf_tets, dtype=bool) & (np.asarray(depth_mm) > VENTRICLE_DEPTH_MM)
+            & (np.abs((centroids - p0) @ n) < VENTRICLE_MIDLINE_MM))
+    vol = np.abs(tet_volumes_mm3(X, T[vent]))
+    if vol.sum() >= VENTRICLE_MIN_ML * MM3_PER_ML:
+        centre = (centroids[vent] * vol[:, None]).sum(axis=0) / vol.sum()
+        return MonroLocation(
+            on_plane(centre + scale * np.asarray(TEMPLATE_MONRO_FROM_VENTRICLES_MM)), "labels")
+    mapped = lo + (np.asarray(MONRO_MNI_MM) - t_lo) * scale
+    return MonroLocation(on_plane(mapped), "bounding box")
+
+
+def monro_midline_shift_mm(
+    nodes_mm: np.ndarray,
+    tets: np.ndarray,
+    u_mm: np.ndarray,
+    plane: MidSagittalPlane,
+    monro: MonroLocation,
+    tissue_tets: np.ndarray | None = None,
+    spacing_mm: float = 1.0,
+) -> dict:
+    """The clinical midline shift (mm): lateral displacement of the mid-sagittal tissue at the
+    level of the foramen of Monro, signed (positive towards the patient's right).
+
+    ``u`` is interpolated (P1) at the points of a grid of ``spacing_mm`` on the mid-sagittal
+    plane within ``MONRO_WINDOW_MM`` of ``monro.point_mm`` (anterior-posterior, inferior-
+    superior) that lie in ``tissue_tets`` (bool per tet, e.g. the parenchyma; default all);
+    ``d = u . n`` with ``n`` the plane's unit normal, and the shift is the ``d`` of largest
+    ``|d|`` there. Interpolating at points of the plane, not taking nodes near it, makes the
+    value independent of where the mesh happens to have nodes.
+
+    Returns ``{"midline_shift_mm", "midline_shift_point_mm" (reference point of that value),
+    "midline_shift_samples" (points in tissue)}``; ``nan`` / ``None`` / 0 with none.
+    """
+    n = np.asarray(plane.normal, dtype=float)
+    n /= np.linalg.norm(n)
+    # two in-plane axes: the one closest to +y (anterior) and the one closest to +z (superior)
+    e_y = np.array([0.0, 1.0, 0.0]) - n[1] * n
+    e_y /= np.linalg.norm(e_y)
+    e_z = np.cross(n, e_y)
+    e_z *= np.sign(e_z[2]) or 1.0
+    hy, hz = MONRO_WINDOW_MM
+    a = np.arange(-hy, hy + 1e-9, spacing_mm)
+    b = np.arange(-hz, hz + 1e-9, spacing_mm)
+    A, B = (g.ravel() for g in np.meshgrid(a, b, indexing="ij"))
+    pts = np.asarray(monro.point_mm) + A[:, None] * e_y + B[:, None] * e_z
+    T = np.asarray(tets)
+    if tissue_tets is not None:
+        T = T[np.asarray(tissue_tets)]
+    u_at, found = interpolate_p1(nodes_mm, T, u_mm, pts)
+    if not found.any():
+        return {"midline_shift_mm": float("nan"), "midline_shift_point_mm": None,
+                "midline_shift_samples": 0}
+    d = u_at[found] @ n
+    k = int(np.argmax(np.abs(d)))
+    return {"midline_shift_mm": float(d[k]),
+            "midline_shift_point_mm": [float(c) for c in pts[found][k]],
+            "midline_shift_samples": int(found.sum())}
+
+
+def interpolate_p1(nodes_mm: np.ndarray, tets: np.ndarray, values: np.ndarray,
+                   points: np.ndarray, candidates: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Values of the P1 field ``values`` (per node) at ``points`` (k, 3): the barycentric
+    combination in the tet that contains each point, searched among the ``candidates`` tets
+    of nearest centroids. Returns (values at the points, found mask); not found: zeros."""
+    from scipy.spatial import cKDTree
+
+    X = np.asarray(nodes_mm, dtype=float)
+    T = np.asarray(tets)
+    V = np.asarray(values, dtype=float)
+    P = np.asarray(points, dtype=float)
+    out = np.zeros((len(P),) + V.shape[1:])
+    found = np.zeros(len(P), dtype=bool)
+    if len(T) == 0 or len(P) == 0:
+        return out, found
+    k = min(candidates, len(T))
+    _, near = cKDTree(X[T].mean(axis=1)).query(P, k=k)
+    near = near.reshape(len(P), k)
+    for j in range(k):
+        todo = np.flatnonzero(~found)
+        if todo.size == 0:
+            break
+        t = T[near[todo, j]]
+        v0 = X[t[:, 0]]
+        M = np.stack([X[t[:, 1]] - v0, X[t[:, 2]] - v0, X[t[:, 3]] - v0], axis=2)
+        ok = np.abs(np.linalg.det(M)) > 0
+        lam = np.zeros((len(todo), 3))
+        lam[ok] = np.linalg.solve(M[ok], (P[todo[ok]] - v0[ok])[..., None])[..., 0]
+        bary = np.column_stack([1 - lam.sum(axis=1), lam])
+        inside = ok & (bary.min(axis=1) >= -1e-9)
+        hit = todo[inside]
+        out[hit] = np.einsum("pk,pk...->p...", bary[inside], V[t[inside]])
+        found[hit] = True
+    return out, found
 
 
 def monro_z_range_mm(half_width_mm: float = 5.0,
                      monro_mm: tuple[float, float, float] = MONRO_MNI_MM) -> tuple[float, float]:
-    """The band ``z_monro +- half_width_mm`` (mm) for :func:`midline_shift_mm` at the level of
-    the foramen of Monro."""
+    """The band ``z_monro +- half_width_mm`` (mm) at the level of the foramen of Monro."""
     z = float(monro_mm[2])
     return (z - half_width_mm, z + half_width_mm)
 
@@ -50,7 +207,9 @@ def midline_shift_mm(
     region_mask: np.ndarray | None = None,
     z_range_mm: tuple[float, float] | None = None,
 ) -> dict:
-    """Largest lateral displacement of the tissue that starts on the mid-sagittal plane (mm).
+    """Largest lateral displacement of the tissue that starts on the mid-sagittal plane (mm),
+    at any height: ``max_midline_displacement_mm`` of the summaries (the clinical midline
+    shift is :func:`monro_midline_shift_mm`).
 
     With ``n`` the plane's unit normal (towards the patient's right) and ``p`` its point, the
     midline nodes are those with ``|(X - p) . n| <= tol_mm`` in the reference configuration,

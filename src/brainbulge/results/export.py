@@ -1,6 +1,7 @@
 """Fields on the mesh vertices and their ParaView file (VTU via meshio).
 
-The displacement gradient is discontinuous between elements, so every field is evaluated at
+Stretches and strains come from the recovered gradient (:mod:`brainbulge.results.recovery`),
+continuous inside each region and discontinuous across regions, so every field is evaluated at
 each element's own vertices and averaged over the elements that share a vertex (point data);
 region and element averages are cell data. ParaView: *Warp By Vector* on ``u`` shows the
 deformed shape.
@@ -22,6 +23,7 @@ from brainbulge.geometry.ngsolve_arrays import (
     vertex_coordinates,
 )
 from brainbulge.results.fields import output_fields, sample
+from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_output
 from brainbulge.solver.mixed import MixedForm
 
@@ -53,7 +55,7 @@ def vertex_fields(
     names = list(mesh.GetMaterials())
 
     mips = element_corners(mesh)
-    s = sample(form, mips)
+    s = sample(form, mips, gradient=recovered_gradient(mesh, form.output_displacement()))
     fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
     for name, cf in (extra or {}).items():
         fields[name] = np.asarray(cf(mips)).reshape(len(s.X), -1).squeeze()

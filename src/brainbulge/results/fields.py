@@ -2,9 +2,12 @@
 
 At any set of points (integration points for summaries, element vertices for files and
 figures) the solution is sampled as ``X``, ``u``, ``Grad u``, ``p``, ``Js``; everything else is
-NumPy:
+NumPy. Stretches and strains use ``F = I + G`` with ``G`` the recovered gradient
+(:mod:`brainbulge.results.recovery`) where the caller passes it (the summaries and the field
+files do):
 
-- ``J = det F``, elastic ``Je = J / Js``, swelling ``Js``;
+- ``J = det F``, elastic ``Je = J / Js``, swelling ``Js`` (``J`` of the solution itself: how
+  well the constraint ``J = Js`` holds);
 - maximum principal Green-Lagrange strain, the largest eigenvalue of ``E = (C - I)/2``;
 - radial ("axonal") stretch ``lambda_n = sqrt(n . C n)`` with ``n`` the unit reference fibre
   direction (radial from a centre by default);
@@ -33,21 +36,31 @@ class Samples:
     F: np.ndarray  # (n, 3, 3) deformation gradient (plane strain: F33 = 1)
     p: np.ndarray  # (n,) multiplier, tension-positive [kPa]
     Js: np.ndarray  # (n,) current swelling
+    #: (n,) ``det F`` of the solution itself (the constraint's ``J``), None: ``det F``
+    J: np.ndarray | None = None
 
 
-def sample(form: MixedForm, points: object) -> Samples:
-    """Evaluate the state of ``form`` at NGSolve mesh points (``MapToAllElements`` output)."""
+def sample(form: MixedForm, points: object,
+           gradient: ngs.CoefficientFunction | None = None) -> Samples:
+    """Evaluate the state of ``form`` at NGSolve mesh points (``MapToAllElements`` output).
+
+    ``gradient``: the displacement gradient that ``F`` is built from, e.g. the recovered
+    gradient of :func:`brainbulge.results.recovery.recovered_gradient` (default: the
+    solution's own, ``Grad u``); ``J`` is always the solution's own ``det(I + Grad u)``."""
     dim = form.dim
     with ngs.TaskManager():  # threaded evaluation: 1.0 -> 0.6 s per 1.5M points
         X = np.asarray(ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])(points)).reshape(-1, dim)
         uo = form.output_displacement()  # (MINI: its P1 part, see there)
         u = np.asarray(uo(points)).reshape(-1, dim)
-        G = np.asarray(ngs.Grad(uo)(points)).reshape(-1, dim, dim)
+        G_raw = np.asarray(ngs.Grad(uo)(points)).reshape(-1, dim, dim)
+        G = G_raw if gradient is None else np.asarray(gradient(points)).reshape(-1, dim, dim)
         p = np.asarray(form.p(points)).reshape(-1)
         Js = np.asarray(form.Js_current()(points)).reshape(-1)
     F = np.tile(np.eye(3), (len(X), 1, 1))
     F[:, :dim, :dim] += G
-    return Samples(X, u, F, p, Js)
+    F_raw = np.tile(np.eye(3), (len(X), 1, 1))
+    F_raw[:, :dim, :dim] += G_raw
+    return Samples(X, u, F, p, Js, det3(F_raw))
 
 
 def radial_directions(X: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -132,7 +145,7 @@ def output_fields(
     """
     dim = s.X.shape[1]
     C = right_cauchy_green(s.F)
-    J = det3(s.F)
+    J = det3(s.F) if s.J is None else s.J
     n = radial_directions(s.X, centre) if fibres is None else fibres
     return {
         "u": s.u,

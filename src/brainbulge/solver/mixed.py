@@ -32,6 +32,7 @@ from brainbulge.errors import InputError
 from brainbulge.materials.kinematics import deformation_gradient
 from brainbulge.materials.mooney_rivlin import MooneyRivlin, mooney_rivlin_psi
 from brainbulge.model.problem import Problem
+from brainbulge.solver.compile_cache import compilation_failed, native_compiler_ready
 from brainbulge.solver.point_contact import PointContact
 
 log = logging.getLogger(__name__)
@@ -314,12 +315,12 @@ def _compiled(W: ngs.CoefficientFunction, native: bool) -> ngs.CoefficientFuncti
     C++ compiler (a one-off ~10 s that makes 3D assembly ~3.5x faster: 2.9 s -> 0.8 s per
     tangent on a 21k-tet brain), falling back to the expression code without a compiler.
     After :func:`brainbulge.runtime.configure` (the command line calls it) the compiler runs
-    through ``ccache`` (:mod:`brainbulge.solver.compile_cache`): the same energy compiled
-    again, by another scenario or run, is a cache hit."""
-    if native:
+    through ``ccache`` (:mod:`brainbulge.solver.compile_cache`, which also finds ``ngscxx``
+    next to the interpreter): the same energy compiled again, by another scenario or run, is
+    a cache hit."""
+    if native and native_compiler_ready():
         try:
             return W.Compile(realcompile=True, wait=True)
         except Exception as exc:  # noqa: BLE001 - NGSolve raises its own types; keep running
-            log.warning("no native compilation of the energy (%s); assembling uncompiled",
-                        str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+            compilation_failed(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     return W.Compile()

@@ -1,23 +1,27 @@
 """The 3D craniectomy (MODEL.md section 6): one scenario, and the paper's six as a study.
 
 ``run_brain(case, out_dir)`` solves one scenario and writes ``summary.json``, ``fields.vtu``
-(ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``
-and ``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
-ranges). A run that stops early keeps the last converged state on disk, marked
-``"converged": false``, and raises :class:`~brainbulge.errors.ConvergenceError`. While it
-runs, ``restart.npz`` holds the state after the last accepted load step: the same scenario
-run again into the same directory (after a kill, or the end of a batch job's time) resumes
-from there; the file is removed when the run completes.
+(ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``,
+``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
+ranges) and ``surface.png`` / ``surface.npz`` (the deformed surface seen from above and from
+the flap, :mod:`brainbulge.results.views3d`). A run that stops early keeps the last converged
+state on disk, marked ``"converged": false``, and raises
+:class:`~brainbulge.errors.ConvergenceError`. While it runs, ``restart.npz`` holds the state
+after the last accepted load step: the same scenario run again into the same directory (after
+a kill, or the end of a batch job's time) resumes from there; the file is removed when the
+run completes.
 
-Clinical metrics (lengths mm, volumes ml, pressures kPa and mmHg):
+Clinical metrics (lengths mm, volumes ml, stresses kPa), named for what they are
+(:mod:`brainbulge.results.brain_summary`; every key in docs/outputs.md):
 
-- ``midline_shift_mm``: largest lateral displacement of parenchyma that starts within 1 mm of
-  the mid-sagittal plane, signed (positive towards the patient's right); also at the level of
-  the foramen of Monro (``midline_shift_monro_mm``, MNI z = 12 +- 5 mm, template meshes);
+- ``midline_shift_mm``: the lateral displacement of the mid-sagittal parenchyma at the level
+  of the foramen of Monro, positive towards the patient's right; the largest at any height
+  is ``max_midline_displacement_mm``;
 - ``bulge_volume_ml``: tissue volume outside the intact skull surface (through the flap);
-- ``swelling_volume_ml``: added volume ``int (Js - 1) dV``; ``brain_volume_ml``;
-- ``max_pressure_kpa``: the largest hydrostatic pressure ``-p`` (whole brain, CSF included);
-  ``mean_pressure_mmhg``: its volume mean over the parenchyma.
+- ``swelling_volume_ml``: added volume ``int (Js - 1) dV``; ``white_matter_volume_ml``: the
+  reference volume of the swelling white matter; ``brain_volume_ml``;
+- ``mean_hydrostatic_stress_kpa``: the volume mean of ``-p`` over the parenchyma (a tissue
+  stress, not an intracranial pressure) and its ratio to the shear modulus.
 
 Stretch and strain extremes are taken over the parenchyma (gray and white matter,
 cerebellum, brainstem) outside a band of ``edge_exclusion_mm`` around the flap rim, where the
@@ -45,15 +49,10 @@ from brainbulge.model.brain import (
     brain_mesh_for,
     brain_problem,
     coarse_brain_mesh_for,
-    white_matter_volume_ml,
 )
 from brainbulge.model.problem import case_from_config
-from brainbulge.results.brain_metrics import (
-    brain_volume_ml,
-    bulge_volume_ml,
-    midline_shift_mm,
-    monro_z_range_mm,
-)
+from brainbulge.results.brain_metrics import brain_volume_ml, bulge_volume_ml
+from brainbulge.results.brain_summary import add_deprecated_aliases, brain_outputs
 from brainbulge.results.export import (
     VertexFields,
     add_contact_fields,
@@ -63,12 +62,12 @@ from brainbulge.results.export import (
 from brainbulge.results.run_record import atomic_write_json
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
+from brainbulge.results.views3d import write_study_surfaces, write_surface_views
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.sequencing import solve_sequenced
 
 #: the parenchyma: where axons are and tissue extremes are taken
 PARENCHYMA = "(gray|white|cerebellum|brainstem)_(left|right)"
-KPA_TO_MMHG = 7.500617
 #: fixed colour ranges of the section figures, so that scenarios compare
 SECTION_RANGES = {
     "|u|": (0.0, 8.0),
@@ -146,6 +145,7 @@ def run_brain(
     )
     state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
     section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
+    write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
@@ -210,15 +210,7 @@ def brain_summary(
     out["swelling_reached"] = 1 + sol.load * (case.swelling - 1)
     # vertex displacements
     u = _vertex_displacements(form, bm)
-    parenchyma_nodes = np.zeros(len(bm.nodes_mm), dtype=bool)
-    names = bm.material_names()
-    is_par = np.array([not n.startswith("csf") for n in names])
-    parenchyma_nodes[bm.tets[is_par].ravel()] = True
-    out.update(midline_shift_mm(bm.nodes_mm, u, bm.midsagittal, region_mask=parenchyma_nodes))
-    monro = midline_shift_mm(
-        bm.nodes_mm, u, bm.midsagittal, region_mask=parenchyma_nodes, z_range_mm=monro_z_range_mm()
-    )
-    out["midline_shift_monro_mm"] = monro["midline_shift_mm"] if monro["midline_nodes"] else None
+    out.update(brain_outputs(bm, form, u, PARENCHYMA, SWELL_SIDES[case.swell]))
 
     def outside(x: np.ndarray) -> np.ndarray:
         return np.minimum(skull.envelope_distance(x, gradient=False)[0],
@@ -228,13 +220,11 @@ def brain_summary(
     out["brain_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets)
     out["deformed_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets, u)
     out["swelling_volume_ml"] = out.pop("swelling_volume") / 1000.0
-    out["white_matter_swelling_ml"] = white_matter_volume_ml(bm, SWELL_SIDES[case.swell])
     out["flap_area_cm2"] = bm.flap_area_cm2(case.flap)
-    out["max_pressure_kpa"] = out.pop("max_pressure")
-    out["min_pressure_kpa"] = out.pop("min_pressure")
-    out["mean_pressure_mmhg"] = _mean_parenchyma_pressure(form) * KPA_TO_MMHG
+    out["max_hydrostatic_stress_kpa"] = out.pop("max_pressure")
+    out["min_hydrostatic_stress_kpa"] = out.pop("min_pressure")
     out["max_penetration_mm"] = out["max_penetration"]
-    return out
+    return add_deprecated_aliases(out)
 
 
 def _fibres(case: CraniectomyCase, bm: BrainMesh):
@@ -252,19 +242,6 @@ def _vertex_displacements(form: MixedForm, bm: BrainMesh) -> np.ndarray:
 
     x = form.gfu.components[0].vec.FV().NumPy()
     return x[vertex_dofs(form.fes.components[0], form.mesh)]
-
-
-def _mean_parenchyma_pressure(form: MixedForm) -> float:
-    import re
-
-    import ngsolve as ngs
-
-    rx = re.compile(f"^(?:{PARENCHYMA})$")
-    mask = form.mesh.MaterialCF(
-        {r: 1.0 for r in set(form.mesh.GetMaterials()) if rx.match(r)}, default=0.0
-    )
-    vol = ngs.Integrate(mask, form.mesh)
-    return float(ngs.Integrate(-form.p * mask, form.mesh) / vol)
 
 
 def section_figure(
@@ -310,7 +287,7 @@ COMPARISON = {
     "max_principal_strain": ("max principal strain", "-"),
     "max_radial_stretch": ("max lambda_n", "-"),
     "max_tangential_stretch": ("max lambda_t", "-"),
-    "max_pressure_kpa": ("max pressure", "kPa"),
+    "mean_hydrostatic_stress_kpa": ("mean hydrostatic stress", "kPa"),
 }
 
 
@@ -397,6 +374,10 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
         vals = " | ".join(f"{float(r.get(k) or 0):.4g}" for k in COMPARISON)
         lines.append(f"| {sc['name']} | {vals} |")
     lines += ["", "![comparison](comparison.png)", ""]
+    for view in write_study_surfaces(out_dir, [sc["name"] for sc, r in zip(scenarios, rows,
+                                                                          strict=True)
+                                               if r.get("complete")]):
+        lines += [f"![{view.stem}]({view.name})", ""]
     for sc, r in zip(scenarios, rows, strict=True):
         if r.get("complete"):
             lines += [f"## {sc['name']}", "", f"![{sc['name']}]({sc['name']}/sections.png)", ""]
