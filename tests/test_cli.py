@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
 
+import nibabel as nib
 import numpy as np
 import pytest
 
@@ -115,6 +117,13 @@ BAD = [
     (["mesh", "--flap", "custom", "--flap-centre", "1000", "0", "0"], "near the skull"),
     (["mesh", "--csf-layer", "nan"], "csf-layer"),
     (["mesh", "--labels", "{text_file}"], "label image"),
+    # a user's segmentation (1,000 ml) meshed too coarse for Netgen: refused up front
+    (["mesh", "--labels", "{cube_labels}", "--label-map", "gmwmcsf", "--tets", "3000"],
+     "too coarse for 1,000 ml of labelled tissue"),
+    (["mesh", "--labels", "{cube_labels}", "--label-map", "gmwmcsf", "--tets", "40000",
+      "--refine", "2"], "give --tets 339904 or more"),
+    (["brain", "--labels", "{cube_labels}", "--label-map", "gmwmcsf", "--tets", "3000"],
+     "give --tets 5311 or more"),
     # studies: every scenario checked before anything starts (exit 2, not 4)
     (["study", "hemidisk-sector", "--scheduler", "not a url"], "scheduler"),
     (["study", "hemidisk-sector", "--steps", "0"], "steps"),
@@ -122,6 +131,12 @@ BAD = [
     (["study", "craniectomy", "--mesh", "{text_file}"], "not a brain.npz"),
     (["study", "hemidisk-sector", "--workers", "1000"], "workers"),
     (["demo", "--scheduler", "http//x"], "scheduler"),
+    (["study", "hemidisk-sector", "--scheduler", "tcp://127.0.0.1:{closed_port}"],
+     "no Dask scheduler reachable"),
+    (["demo", "--scheduler", "127.0.0.1:{closed_port}"], "no Dask scheduler reachable"),
+    (["reproduce", "--scheduler", "tcp://127.0.0.1:{closed_port}"],
+     "no Dask scheduler reachable"),
+    (["study", "hemidisk-sector", "--scheduler", "tcp://127.0.0.1:99999"], "[1, 65535]"),
     (["demo", "--workers", "0"], "workers"),
     (["study", "hemidisk-sector", "--out", "{run}"], "--overwrite"),
     (["study", "hemidisk-disk", "--out", "{study}"], "'hemidisk-sector'"),
@@ -178,6 +193,10 @@ def workspace(tmp_path, monkeypatch):
     (tmp_path / "thesis.tex").write_text("\\section{Results}\n")
     (tmp_path / "text.npz").write_text("nodes, tets\n1 2 3\n")
     (tmp_path / "empty.npz").write_bytes(b"")
+    cube = np.zeros((52, 52, 52), dtype=np.uint8)  # 1,000 ml in 2 mm voxels
+    cube[1:51, 1:51, 1:51] = 2  # gray
+    cube[11:41, 11:41, 11:41] = 3  # white
+    nib.save(nib.Nifti1Image(cube, np.diag([2.0, 2.0, 2.0, 1.0])), tmp_path / "cube.nii.gz")
     np.savez(tmp_path / "foreign.npz", a=np.arange(3))
     np.savez(tmp_path / "whole.npz", nodes_mm=np.zeros((100, 3)), tets=np.zeros((100, 4)))
     data = (tmp_path / "whole.npz").read_bytes()
@@ -194,10 +213,12 @@ def _expand(arg: str, tmp: Path) -> str:
     names = {"{run}": "run", "{run_with_notes}": "run_with_notes", "{old_run}": "old_run",
              "{study}": "study", "{user_file}": "thesis.tex", "{text_file}": "text.npz",
              "{truncated_npz}": "truncated.npz", "{foreign_npz}": "foreign.npz",
-             "{empty_file}": "empty.npz"}
+             "{empty_file}": "empty.npz", "{cube_labels}": "cube.nii.gz"}
     for key, name in names.items():
         arg = arg.replace(key, str(tmp / name))
     arg = arg.replace("{tmp}", str(tmp))
+    if "{closed_port}" in arg:
+        arg = arg.replace("{closed_port}", str(closed_port()))
     for kind, command in (("{toml:", "hemidisk"), ("{brain_toml:", "brain")):
         if arg.startswith(kind):
             path = tmp / "cfg" / f"{abs(hash(arg))}.toml"
@@ -205,6 +226,13 @@ def _expand(arg: str, tmp: Path) -> str:
             path.write_text(f"command = '{command}'\n[{command}]\n{arg[len(kind):-1]}\n")
             arg = str(path)
     return arg
+
+
+def closed_port() -> int:
+    """A local TCP port nothing listens on (bound, then released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def _tree(root: Path) -> dict[str, bytes]:
@@ -239,6 +267,37 @@ def test_bad_input_table(argv, message, workspace, capsys) -> None:
 
 def test_the_table_is_large() -> None:
     assert len(BAD) >= 60
+
+
+def test_a_listening_scheduler_address_passes_the_probe() -> None:
+    from brainbulge.cli import checks
+    from brainbulge.errors import InputError
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        checks.scheduler(f"tcp://127.0.0.1:{port}")
+        checks.scheduler(f"localhost:{port}")
+    with pytest.raises(InputError, match="refused"):
+        checks.scheduler(f"tcp://127.0.0.1:{port}")
+    checks.scheduler("inproc://127.0.0.1:1")  # in-process addresses are not probed
+
+
+def test_a_coarse_mesh_of_a_segmentation_is_refused_or_warned(caplog) -> None:
+    from brainbulge.cli import checks
+    from brainbulge.errors import InputError
+
+    with pytest.raises(InputError, match=r"give --tets 5311 or more \(from 13277"):
+        checks.mesh_tets(5000, 0, template=False, labelled_ml=1000.0)
+    with caplog.at_level("WARNING"):
+        checks.mesh_tets(8000, 0, template=False, labelled_ml=1000.0)
+    assert "Netgen may retry for minutes; from --tets 13277" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        checks.mesh_tets(13_277, 0, template=False, labelled_ml=1000.0)
+        checks.mesh_tets(3000, 0, template=False, labelled_ml=200.0)  # a small phantom
+    assert caplog.text == ""
 
 
 def test_bad_toml(tmp_path, capsys) -> None:

@@ -7,14 +7,18 @@ workstation and what Netgen can mesh (MODEL.md, docs/outputs.md "Exit codes").
 
 from __future__ import annotations
 
+import logging
 import math
 import re
+import socket
 import types
 import typing
 from pathlib import Path
 from typing import Any, Union
 
 from brainbulge.errors import InputError
+
+log = logging.getLogger(__name__)
 
 #: hemidisk element sizes [units of R]: 0.005 R makes ~150,000 triangles (P2: hours of
 #: Newton); a corner or rim size below 1e-4 R makes Netgen grade over 4 decades
@@ -34,10 +38,19 @@ MESH_TETS = (1_000, 5_000_000)
 #: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
 #: finish in 5 minutes)
 TEMPLATE_TETS_MIN = 25_000
+#: the template's labelled volume [ml] (all tissues of ``icbm152_tissue_image``)
+TEMPLATE_LABELLED_ML = 1883.0
+#: a user's segmentation (``--labels``): target tets per ml of labelled tissue before
+#: refinement. Netgen's trouble depends on the element size in mm against a brain's mm-scale
+#: surface, so the template's densities carry over: below 10,000 tets (5.3 per ml) it gave up
+#: on the template, from 25,000 (13.3 per ml) it meshes; in between a warning.
+LABELS_TETS_PER_ML = (10_000 / TEMPLATE_LABELLED_ML, TEMPLATE_TETS_MIN / TEMPLATE_LABELLED_ML)
 #: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
 FLAP_CENTRE_MM = 150.0
 #: Dask scheduler addresses: ``[protocol://]host:port``
 SCHEDULER = re.compile(r"((tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]*[A-Za-z0-9\]]:\d{1,5}")
+#: seconds a Dask scheduler has to accept a connection before a study is refused
+SCHEDULER_PROBE_S = 5.0
 
 
 # --------------------------------------------------------------------------- generic
@@ -193,9 +206,10 @@ def brain_case(config: dict[str, Any]) -> Any:
     number("steps", case.steps, *STEPS, integer=True)
     flap_centre(case.flap_centre_mm)
     if case.mesh is None:
-        mesh_tets(case.tets, case.refine, template=case.labels is None)
+        labelled = None if case.labels is None else labelled_ml(case.labels, case.label_map)
+        mesh_tets(case.tets, case.refine, template=case.labels is None, labelled_ml=labelled)
         if case.coarse_tets is not None:
-            mesh_tets(case.coarse_tets, 0, template=case.labels is None)
+            mesh_tets(case.coarse_tets, 0, template=case.labels is None, labelled_ml=labelled)
     if case.mesh is not None:
         brain_npz(case.mesh)
     if case.coarse_mesh is not None:
@@ -203,26 +217,80 @@ def brain_case(config: dict[str, Any]) -> Any:
     return case
 
 
-def mesh_tets(tets: Any, refine: Any, template: bool) -> None:
+def mesh_tets(tets: Any, refine: Any, template: bool, labelled_ml: float | None = None
+              ) -> None:
     """A brain mesh of about ``tets`` tets made at ``tets / 8**refine`` and refined; of the
-    ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement."""
+    ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement, of a
+    segmentation with ``labelled_ml`` ml of tissue at least `LABELS_TETS_PER_ML` per ml."""
     number("--refine", refine, 0, 3, integer=True)
     number("--tets", tets, *MESH_TETS, integer=True)
+    made = f"--tets {tets}" + (f" / 8^{refine}" if refine else "")
     if template and tets / 8**refine < TEMPLATE_TETS_MIN:
         raise InputError(
-            f"--tets {tets}" + (f" / 8^{refine}" if refine else "") + f" is below "
-            f"{TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template that coarse (it "
-            f"retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} or more")
+            f"{made} is below {TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template "
+            f"that coarse (it retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} "
+            "or more")
+    if labelled_ml is None:
+        return
+    least, safe = (math.ceil(rate * labelled_ml) * 8**refine for rate in LABELS_TETS_PER_ML)
+    if tets < least:
+        raise InputError(
+            f"{made} is too coarse for {labelled_ml:,.0f} ml of labelled tissue: below "
+            f"{LABELS_TETS_PER_ML[0]:.1f} tets per ml Netgen gives up on a brain's surface "
+            f"(and retries for minutes); give --tets {least} or more (from {safe} it meshes "
+            "the template)")
+    if tets < safe:
+        log.warning("%s for %.0f ml of labelled tissue is coarse: Netgen may retry for minutes; "
+                    "from --tets %d it meshes the template", made, labelled_ml, safe)
+
+
+def labelled_ml(labels: str | Path, label_map: Any) -> float:
+    """Volume [ml] of all tissues of the segmentation ``labels`` (as `mesh` maps them)."""
+    from brainbulge.geometry.brain import load_tissue_image
+
+    p = Path(labels)
+    try:
+        st = p.stat()
+    except OSError:
+        raise InputError(f"--labels {labels}: no such file; give a NIfTI label image "
+                         "(.nii/.nii.gz)") from None
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns, str(label_map))
+    if key not in _LABELLED_ML:  # a study's scenarios share one segmentation
+        volumes = load_tissue_image(p, label_map).volumes_ml()
+        _LABELLED_ML[key] = float(sum(volumes.values()))
+    return _LABELLED_ML[key]
+
+
+_LABELLED_ML: dict[tuple[str, int, int, str], float] = {}
 
 
 # --------------------------------------------------------------------------- study
 
 
 def scheduler(address: str | None) -> None:
-    """``None``, ``serial`` or a Dask address ``[tcp://]host:port``."""
+    """``None``, ``serial`` or a Dask address ``[tcp://]host:port`` at which something
+    accepts a connection within `SCHEDULER_PROBE_S` (tcp, tls, ws, wss; inproc and ucx
+    addresses are not probed)."""
     if address is None or address == "serial":
         return
     if not SCHEDULER.fullmatch(address):
         raise InputError(
             f"--scheduler {address!r} is not a Dask scheduler address; give one such as "
             "tcp://10.0.0.5:8786, 'serial', or leave it out for a local cluster")
+    protocol, _, rest = address.rpartition("://")
+    if protocol not in ("", "tcp", "tls", "ws", "wss"):
+        return
+    host, _, port = rest.rpartition(":")
+    if not 1 <= int(port) <= 65535:
+        raise InputError(f"--scheduler {address}: port {port} must lie in [1, 65535]; give the "
+                         "port the scheduler prints (8786 by default)")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), SCHEDULER_PROBE_S):
+            pass
+    except OSError as exc:
+        reason = (f"no answer in {SCHEDULER_PROBE_S:g} s" if isinstance(exc, TimeoutError)
+                  else exc.strerror or str(exc))
+        raise InputError(
+            f"--scheduler {address}: no Dask scheduler reachable there ({reason.lower()}); "
+            "start one (`dask scheduler`) or correct the address, or leave --scheduler out "
+            "for a local cluster") from None

@@ -16,6 +16,7 @@ from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
 from brainbulge.errors import InputError
+from brainbulge.results.run_record import atomic_write_text
 
 REPORT_KEYS = (
     "max_displacement",
@@ -170,5 +171,5 @@ def write_report(
         "corners, sector edges on the boundary); `raw_*` in the tables are over all points.",
     ]
     path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n")
     return path

@@ -68,9 +68,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--csf-layer {args.csf_layer} mm must lie in [0, 10] mm")
     if args.base_z is not None and not math.isfinite(args.base_z):
         raise InputError(f"--base-z {args.base_z} must be a finite height [mm, world z]")
-    checks.mesh_tets(args.tets, args.refine, template=args.labels is None)
     checks.flap_centre(args.flap_centre)
     image = load_tissue_image(args.labels, args.label_map) if args.labels else None
+    checks.mesh_tets(args.tets, args.refine, template=args.labels is None,
+                     labelled_ml=sum(image.volumes_ml().values()) if image else None)
     config = {"command": "mesh", "mesh": {
         "labels": args.labels, "label_map": args.label_map, "tets": args.tets,
         "brain_volume_ml": args.brain_volume, "flap": args.flap,

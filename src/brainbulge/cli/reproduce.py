@@ -19,13 +19,13 @@ goes on from its last load step. ``--tets 30000`` (21k tets) gives the 3D part i
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
 from brainbulge.cli.study import StudyIncomplete, incomplete_text, run_study_and_report
 from brainbulge.geometry.brain.defaults import FIXATIONS
+from brainbulge.results.run_record import atomic_write_json
 
 #: default 3D mesh size: Netgen at 181k tets, refined once to ~1.4M (the paper: 1.28M)
 PAPER_TETS = 1_450_000
@@ -63,9 +63,11 @@ def brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, Any]:
 
 
 def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
+    from brainbulge.cli import checks
     from brainbulge.studies import hemidisk as hd
     from brainbulge.studies.craniectomy import case_from_dict, craniectomy_scenarios
 
+    checks.scheduler(args.scheduler)
     brain = craniectomy_scenarios(**brain_options(args.tets, args.fix))
     for sc in brain:
         case_from_dict(sc)  # validate before touching --out
@@ -82,7 +84,7 @@ def run_command(args: argparse.Namespace) -> int:
     resume = (out_path / "study.json").is_file() and not args.overwrite
     out = start_run(args, {"command": "reproduce", "tets": args.tets, "fix": args.fix},
                     resume=resume)
-    (out / "study.json").write_text(json.dumps({"study": "reproduce", "parts": list(parts)}))
+    atomic_write_json(out / "study.json", {"study": "reproduce", "parts": list(parts)})
     names = {"sector": "hemidisk-sector", "disk": "hemidisk-disk"}
     failed, texts = 0, []
     for i, (part, scenarios) in enumerate(parts.items(), start=1):

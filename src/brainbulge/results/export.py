@@ -24,6 +24,7 @@ from brainbulge.geometry.ngsolve_arrays import (
 )
 from brainbulge.results.fields import output_fields, sample
 from brainbulge.results.recovery import recovered_gradient
+from brainbulge.results.run_record import atomic_output
 from brainbulge.solver.mixed import MixedForm
 
 
@@ -102,5 +103,6 @@ def write_vtu(path: Path, vf: VertexFields) -> Path:
     }
     m = meshio.Mesh(pts, [(cell_type, vf.cells)], point_data=point_data, cell_data=cell_data)
     path = Path(path)
-    m.write(path)
+    with atomic_output(path) as tmp:
+        m.write(tmp)
     return path

@@ -13,6 +13,7 @@ import matplotlib.tri as mtri  # noqa: E402
 import numpy as np  # noqa: E402
 
 from brainbulge.results.export import VertexFields  # noqa: E402
+from brainbulge.results.run_record import atomic_output  # noqa: E402
 
 LABELS = {
     "u_magnitude": "|u|",
@@ -176,6 +177,9 @@ def _outline(ax, vf: VertexFields) -> None:
 def _save(fig, path: Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_output(path) as tmp:
+            fig.savefig(tmp, dpi=130, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path

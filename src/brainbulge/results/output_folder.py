@@ -64,9 +64,11 @@ Signature = tuple[int, int, int]
 
 
 def _is_temporary(name: str) -> bool:
-    """Temporary files of brainbulge's atomic writes (``.NAME.XXXX.tmp``, ``NAME.tmp.npz``)."""
+    """Temporary files of brainbulge's atomic writes (``.NAME.XXXX.tmp[.EXT]``,
+    ``NAME.tmp.npz``)."""
     return name == LOCK_FILE or name.startswith(f"{LOCK_FILE}.") or (
-        name.startswith(".") and name.endswith(".tmp")) or name.endswith(".tmp.npz")
+        name.startswith(".") and (name.endswith(".tmp") or ".tmp." in name)
+    ) or name.endswith(".tmp.npz")
 
 
 def folder_files(path: Path) -> dict[str, Signature]:

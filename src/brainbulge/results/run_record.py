@@ -38,7 +38,8 @@ import subprocess
 import sys
 import tempfile
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from datetime import UTC, date, datetime, time
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path, PurePath
@@ -52,6 +53,7 @@ from brainbulge.results.output_folder import RUN_MARKERS, refresh_manifest
 
 __all__ = [
     "STATUSES",
+    "atomic_output",
     "atomic_write_json",
     "atomic_write_text",
     "is_run_folder",
@@ -82,24 +84,40 @@ RECORDED_PACKAGES = (
 # --------------------------------------------------------------------------- atomic files
 
 
-def atomic_write_text(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` atomically: a temporary file in the same folder, then rename.
+@contextmanager
+def atomic_output(path: Path) -> Iterator[Path]:
+    """A temporary path next to ``path`` to write to; renamed onto ``path`` when the block ends.
 
-    Readers see either the old or the new content, never a truncated file.
+    The temporary name (``.NAME.XXXX.tmp.EXT``) keeps ``path``'s extension, so writers that
+    choose the format by it (meshio, matplotlib, ``np.savez``) work unchanged. On success the
+    file gets the permissions the user's umask allows (not ``mkstemp``'s 0600), is synced to
+    disk and replaces ``path`` in one step; on any error (a full disk mid-write) it is deleted
+    and ``path`` is left as it was: readers never see a truncated or empty result.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
+                                suffix=f".tmp{path.suffix}")
+    os.close(fd)
+    tmp = Path(name)
     try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp's 0600 would hide results from others
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
+        yield tmp
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would hide results from others
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
-    return path
+
+
+def atomic_write_text(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (see `atomic_output`)."""
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
 
 
 def _umask() -> int:

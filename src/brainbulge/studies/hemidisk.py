@@ -30,7 +30,7 @@ from brainbulge.results.export import (
     write_vtu,
 )
 from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
-from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.run_record import atomic_output, atomic_write_json
 from brainbulge.results.summary import solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.newton import DIVERGENCE_ADVICE
@@ -134,14 +134,16 @@ def _label(case: HemidiskCase) -> str:
 
 
 def save_vertex_fields(path: Path, vf: VertexFields) -> Path:
-    np.savez_compressed(
-        path,
-        points=vf.points,
-        cells=vf.cells,
-        regions=vf.regions,
-        region_names=np.array(vf.region_names),
-        **{f"point_{k}": v for k, v in vf.point_data.items()},
-    )
+    """Write the vertex fields to ``path`` (compressed ``.npz``, atomically)."""
+    with atomic_output(path) as tmp:
+        np.savez_compressed(
+            tmp,
+            points=vf.points,
+            cells=vf.cells,
+            regions=vf.regions,
+            region_names=np.array(vf.region_names),
+            **{f"point_{k}": v for k, v in vf.point_data.items()},
+        )
     return path
 
 
@@ -228,7 +230,7 @@ def write_study_table(rows: list[dict[str, Any]], scenarios: list[dict], path: P
             if k not in keys and not isinstance(v, (list, dict)):
                 keys.append(k)
     in_keys = [k for k in ("alpha", "beta", "contact", "swelling", "disk") if k]
-    with open(path, "w", newline="") as fh:
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(in_keys + [k for k in keys if k not in in_keys])
         for sc, r in zip(scenarios, rows, strict=True):

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from brainbulge.results.run_record import atomic_write_text
+
 #: a maximum "around the opening's edge" lies within this distance of a corner [R]
 EDGE_NEIGHBOURHOOD = 0.15
 
@@ -158,5 +160,5 @@ def write_sector_report(out_dir: Path, scenarios: Sequence[dict], rows: Sequence
     if figures:
         lines += ["", "## Figures", ""] + [f"![{name}]({name})" for name in figures]
     path = Path(out_dir) / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n")
     return path
