@@ -36,6 +36,10 @@ def add_parser(sub: Any) -> None:
                    help="brain mesh size in tets (craniectomy study)")
     p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
     p.add_argument("--swelling", type=float, default=1.1, help="white-matter Js (craniectomy)")
+    p.add_argument("--fix", choices=("inferior", "inferior+superior"),
+                   default="inferior+superior",
+                   help="fixed outer surface (craniectomy): the base, or the base and the "
+                   "superior midline band (the paper's Figure 6)")
     p.add_argument("--steps", type=int, default=4, help="initial load steps per scenario")
     p.add_argument(
         "--alphas", type=float, nargs="+", default=None, help="sector angles [deg] (sector study)"
@@ -54,7 +58,8 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
         from brainbulge.studies.craniectomy import craniectomy_scenarios
 
         return craniectomy_scenarios(
-            tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps
+            tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps,
+            fix=args.fix,
         )
     common = {"mesh_size": args.mesh_size, "steps": args.steps, "skull": args.skull}
     for key in ("corner_mesh_size", "rim_mesh_size"):  # only when given: a rerun of an
