@@ -33,7 +33,7 @@ def _spec(common: dict) -> dict:
 def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tets) -> None:
     """The geometry options (brain volume, refinement, coarse size) build the shared meshes
     and are then dropped: the scenarios on the meshes pass validation."""
-    args = argparse.Namespace(tets=tets, fix="inferior+superior", mesh_size=0.05)
+    args = argparse.Namespace(tets=tets, fix="inferior+superior", mesh_size=0.05, scheduler=None)
     brain = reproduce.plan(args)["craniectomy"]
     assert len(brain) == 6 and all(sc["brain_volume_ml"] == 1108.0 for sc in brain)
     common = brain[0]
