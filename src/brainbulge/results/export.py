@@ -106,3 +106,23 @@ def write_vtu(path: Path, vf: VertexFields) -> Path:
     with atomic_output(path) as tmp:
         m.write(tmp)
     return path
+
+
+def save_vertex_fields(path: Path, vf: VertexFields) -> Path:
+    """Write the vertex fields to ``path`` (compressed ``.npz``, atomically)."""
+    with atomic_output(path) as tmp:
+        np.savez_compressed(
+            tmp,
+            points=vf.points,
+            cells=vf.cells,
+            regions=vf.regions,
+            region_names=np.array(vf.region_names),
+            **{f"point_{k}": v for k, v in vf.point_data.items()},
+        )
+    return path
+
+
+def load_vertex_fields(path: Path) -> VertexFields:
+    d = np.load(path)
+    pd = {k[6:]: d[k] for k in d.files if k.startswith("point_")}
+    return VertexFields(d["points"], d["cells"], d["regions"], list(d["region_names"]), pd, {})

@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
+from brainbulge.atomic import atomic_output
 from brainbulge.results.figures import CMAPS, LABELS  # noqa: E402
 
 #: the four fields of the paper's Figure 9: (point-data key, title)
@@ -73,10 +74,11 @@ class Surface:
 
     def save(self, path: Path) -> Path:
         """``surface.npz`` of a scenario: what :func:`plot_study_surfaces` reads."""
-        np.savez_compressed(path, points=self.points, faces=self.faces, u=self.u,
-                            flap_faces=self.flap_faces, flap_direction=self.flap_direction,
-                            rim=self.rim,
-                            **{f"field_{k}": v for k, v in self.fields.items()})
+        with atomic_output(Path(path)) as tmp:
+            np.savez_compressed(tmp, points=self.points, faces=self.faces, u=self.u,
+                                flap_faces=self.flap_faces,
+                                flap_direction=self.flap_direction, rim=self.rim,
+                                **{f"field_{k}": v for k, v in self.fields.items()})
         return Path(path)
 
     @classmethod
@@ -167,7 +169,8 @@ def plot_surface_views(s: Surface, path: str | Path, title: str = "",
                      else label)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.savefig(path, dpi=dpi)
+    with atomic_output(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=dpi)
     plt.close(fig)
     return Path(path)
 
@@ -208,7 +211,8 @@ def plot_study_surfaces(surfaces: dict[str, Surface], path: str | Path, view: st
                      shrink=0.8, aspect=30, label=label)
     fig.suptitle(f"deformed surface seen {'from above' if view == 'above' else 'from the flap'}"
                  " (colour ranges shared by the scenarios)", fontsize=10)
-    fig.savefig(path, dpi=dpi)
+    with atomic_output(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=dpi)
     plt.close(fig)
     return Path(path)
 

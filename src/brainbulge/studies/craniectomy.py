@@ -57,10 +57,11 @@ from brainbulge.results.brain_summary import add_deprecated_aliases, brain_outpu
 from brainbulge.results.export import (
     VertexFields,
     add_contact_fields,
+    save_vertex_fields,
     vertex_fields,
     write_vtu,
 )
-from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.run_record import atomic_output, atomic_write_json, atomic_write_text
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
 from brainbulge.results.views3d import write_study_surfaces, write_surface_views
@@ -136,14 +137,7 @@ def run_brain(
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
-    np.savez_compressed(
-        out_dir / "fields.npz",
-        points=vf.points,
-        cells=vf.cells,
-        regions=vf.regions,
-        region_names=np.array(vf.region_names),
-        **{f"point_{k}": v for k, v in vf.point_data.items()},
-    )
+    save_vertex_fields(out_dir / "fields.npz", vf)
     state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
     section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
     write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
@@ -332,7 +326,7 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any], folder: str = "mes
     case = case_from_dict({k: v for k, v in common.items()
                            if k not in ("mesh", "coarse_tets", "coarse_mesh")})
     save_brain_mesh(brain_mesh_for(case), path.parent)
-    spec_path.write_text(json.dumps(spec))
+    atomic_write_text(spec_path, json.dumps(spec))
     return path
 
 
@@ -378,7 +372,7 @@ def write_comparison(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> 
     keys: list[str] = []
     for r in rows:
         keys += [k for k, v in r.items() if k not in keys and not isinstance(v, (list, dict))]
-    with open(out_dir / "table.csv", "w", newline="") as fh:
+    with atomic_output(out_dir / "table.csv") as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["name", "flap", "swell", *keys])
         for sc, r in zip(scenarios, rows, strict=True):
@@ -395,7 +389,8 @@ def write_comparison(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> 
         ax.axhline(0, color="k", lw=0.5)
     fig.suptitle("craniectomy scenarios: flap (blue left, red frontal) x swelling side")
     fig.tight_layout()
-    fig.savefig(out_dir / "comparison.png", dpi=110)
+    with atomic_output(out_dir / "comparison.png") as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return [out_dir / "table.csv", out_dir / "comparison.png"]
 
@@ -428,6 +423,4 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
     for sc, r in zip(scenarios, rows, strict=True):
         if r.get("complete"):
             lines += [f"## {sc['name']}", "", f"![{sc['name']}]({sc['name']}/sections.png)", ""]
-    path = out_dir / "report.md"
-    path.write_text("\n".join(lines))
-    return path
+    return atomic_write_text(out_dir / "report.md", "\n".join(lines))

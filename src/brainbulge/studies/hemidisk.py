@@ -24,8 +24,9 @@ from brainbulge.errors import ConvergenceError
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.model.problem import case_from_config
 from brainbulge.results.export import (
-    VertexFields,
     add_contact_fields,
+    load_vertex_fields,
+    save_vertex_fields,
     vertex_fields,
     write_vtu,
 )
@@ -131,26 +132,6 @@ def _expected_area_ratio(case: HemidiskCase) -> float:
 def _label(case: HemidiskCase) -> str:
     what = f"alpha {case.alpha:g}" if case.alpha is not None else f"disk {case.disk}"
     return f"{what}, beta {case.beta:g}, Js {case.swelling:g}, {case.contact}"
-
-
-def save_vertex_fields(path: Path, vf: VertexFields) -> Path:
-    """Write the vertex fields to ``path`` (compressed ``.npz``, atomically)."""
-    with atomic_output(path) as tmp:
-        np.savez_compressed(
-            tmp,
-            points=vf.points,
-            cells=vf.cells,
-            regions=vf.regions,
-            region_names=np.array(vf.region_names),
-            **{f"point_{k}": v for k, v in vf.point_data.items()},
-        )
-    return path
-
-
-def load_vertex_fields(path: Path) -> VertexFields:
-    d = np.load(path)
-    pd = {k[6:]: d[k] for k in d.files if k.startswith("point_")}
-    return VertexFields(d["points"], d["cells"], d["regions"], list(d["region_names"]), pd, {})
 
 
 # --- studies ----------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
+from brainbulge.atomic import atomic_output, atomic_write_text
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain.boundaries import Flap, SuperiorBand
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
@@ -98,31 +99,38 @@ def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = Non
     )
     paths = {"vtu": out / "brain.vtu", "xdmf": out / "brain.xdmf", "npz": out / "brain.npz",
              "json": out / "mesh.json"}
-    mm.write(paths["vtu"])
+    with atomic_output(paths["vtu"]) as tmp:
+        mm.write(tmp)
     try:  # meshio's XDMF writer needs h5py (heavy data in brain.h5)
         import h5py  # noqa: F401
     except ImportError:
         log.warning("h5py is not installed: brain.xdmf not written (pip install h5py)")
         paths.pop("xdmf")
-    else:
+    else:  # in place: its heavy data goes to brain.h5, which the file names
         mm.write(paths["xdmf"])
-    env = mesh.envelope
-    np.savez(
-        paths["npz"], nodes_mm=mesh.nodes_mm, tets=mesh.tets, tissue=mesh.tissue,
-        side=mesh.side, faces=mesh.faces, face_tet=mesh.face_tet, base=mesh.base,
-        base_z_mm=mesh.base_z_mm, envelope_sdf_mm=env.sdf_mm, envelope_affine=env.affine,
-        flaps_json=json.dumps({n: _flap_dict(f) for n, f in mesh.flaps.items()}),
-        voxel_volumes_json=json.dumps(mesh.voxel_volumes_ml),
-        midsagittal_json=json.dumps(asdict(mesh.midsagittal)),
-    )
+    with atomic_output(paths["npz"]) as tmp:
+        _save_npz(tmp, mesh)
     summary = brain_summary(mesh)
-    paths["json"].write_text(json.dumps(summary, indent=2, default=_json_default))
+    atomic_write_text(paths["json"], json.dumps(summary, indent=2, default=_json_default))
     if figures:
         from brainbulge.geometry.brain.figures import plot_boundaries, plot_sections
 
         paths["sections"] = plot_sections(mesh, out / "sections.png")
         paths["boundaries"] = plot_boundaries(mesh, out / "boundaries.png")
     return paths
+
+
+def _save_npz(path: Path, mesh: BrainMesh) -> None:
+    """``brain.npz``: everything :func:`load_brain_mesh` needs."""
+    env = mesh.envelope
+    np.savez(
+        path, nodes_mm=mesh.nodes_mm, tets=mesh.tets, tissue=mesh.tissue,
+        side=mesh.side, faces=mesh.faces, face_tet=mesh.face_tet, base=mesh.base,
+        base_z_mm=mesh.base_z_mm, envelope_sdf_mm=env.sdf_mm, envelope_affine=env.affine,
+        flaps_json=json.dumps({n: _flap_dict(f) for n, f in mesh.flaps.items()}),
+        voxel_volumes_json=json.dumps(mesh.voxel_volumes_ml),
+        midsagittal_json=json.dumps(asdict(mesh.midsagittal)),
+    )
 
 
 def _json_default(o: object) -> object:

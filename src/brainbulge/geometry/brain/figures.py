@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
+from brainbulge.atomic import atomic_output
 from brainbulge.geometry.brain.boundaries import SuperiorBand  # noqa: E402
 from brainbulge.geometry.brain.brain_mesh import BrainMesh  # noqa: E402
 from brainbulge.geometry.brain.labels import TISSUES  # noqa: E402
@@ -65,7 +66,8 @@ def plot_sections(mesh: BrainMesh, path: str | Path, centre_mm: np.ndarray | Non
     fig.suptitle(f"brain mesh: {len(mesh.tets):,} tets (left hemisphere darker; "
                  f"dashed: base cut plane)")
     fig.tight_layout(rect=(0, 0.06, 1, 0.95))
-    fig.savefig(path, dpi=110)
+    with atomic_output(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return Path(path)
 
@@ -108,6 +110,7 @@ def plot_boundaries(mesh: BrainMesh, path: str | Path, flaps: list[str] | None =
                for n, c in _BC_COLOURS.items() if superior is not None or n != "superior"]
     fig.legend(handles=handles, loc="lower center", ncol=4)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=80)
+    with atomic_output(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=80)
     plt.close(fig)
     return Path(path)
