@@ -125,7 +125,7 @@ def write_report(
         "",
         "Weickenmeier et al., *Bulging brains* (J. Elasticity 2017), in miniature: a plane-strain",
         "hemidisk whose sector of angle alpha swells to Js = 1.2 and bulges through a skull",
-        "opening of angle beta; no-slip and frictionless sliding contact with the rigid skull.",
+        "opening of angle beta in the paper's skull arc; no-slip or frictionless sliding on it.",
         "",
         "## Headline case: alpha = 80 deg, beta = 60 deg",
         "",
