@@ -174,12 +174,13 @@ def _outline(ax, vf: VertexFields) -> None:
     ax.set_axis_off()
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig, path: Path, dpi: int = 130, bbox_inches: str | None = "tight") -> Path:
+    """Write ``fig`` to ``path`` atomically and close it (every results figure ends here)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         with atomic_output(path) as tmp:
-            fig.savefig(tmp, dpi=130, bbox_inches="tight")
+            fig.savefig(tmp, dpi=dpi, bbox_inches=bbox_inches)
     finally:
         plt.close(fig)
     return path

@@ -25,8 +25,7 @@ import matplotlib.tri as mtri  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from brainbulge.atomic import atomic_output
-from brainbulge.results.figures import CMAPS, LABELS, _limits  # noqa: E402
+from brainbulge.results.figures import CMAPS, LABELS, _limits, _save  # noqa: E402
 
 # name -> (normal axis, horizontal axis, vertical axis, (left, right) and (bottom, top) labels)
 # in RAS+ world coordinates (x right, y anterior, z superior).
@@ -201,10 +200,7 @@ def plot_sections(
             fig.colorbar(im, ax=list(axes[row]), shrink=0.85, label=LABELS.get(field_key, name))
     if title:
         fig.suptitle(title, fontsize=11)
-    with atomic_output(Path(path)) as tmp:
-        fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 
 def _field_key(name: str) -> str:

@@ -30,7 +30,7 @@ from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
 from brainbulge.atomic import atomic_output
-from brainbulge.results.figures import CMAPS, LABELS  # noqa: E402
+from brainbulge.results.figures import CMAPS, LABELS, _save  # noqa: E402
 
 #: the four fields of the paper's Figure 9: (point-data key, title)
 SURFACE_FIELDS: dict[str, str] = {
@@ -169,10 +169,7 @@ def plot_surface_views(s: Surface, path: str | Path, title: str = "",
                      else label)
     if title:
         fig.suptitle(title, fontsize=11)
-    with atomic_output(Path(path)) as tmp:
-        fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 
 def shared_ranges(surfaces: Sequence[Surface]) -> dict[str, tuple[float, float]]:
@@ -211,10 +208,7 @@ def plot_study_surfaces(surfaces: dict[str, Surface], path: str | Path, view: st
                      shrink=0.8, aspect=30, label=label)
     fig.suptitle(f"deformed surface seen {'from above' if view == 'above' else 'from the flap'}"
                  " (colour ranges shared by the scenarios)", fontsize=10)
-    with atomic_output(Path(path)) as tmp:
-        fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 
 def brain_surface(nodes: np.ndarray, tets: np.ndarray, brain_tets: np.ndarray

@@ -49,7 +49,6 @@ started by a `LocalCluster` inherit this process's environment (e.g. ``PYTHONPAT
 from __future__ import annotations
 
 import contextlib
-import importlib
 import json
 import logging
 import os
@@ -57,16 +56,25 @@ import re
 import sys
 import traceback
 import uuid
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from datetime import UTC, datetime
-from pathlib import Path, PurePath
+from pathlib import Path
 from typing import Any
 
 from tqdm.auto import tqdm
 
-from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.errors import InputError
 from brainbulge.results.output_folder import refresh_manifest
 from brainbulge.results.run_record import atomic_write_json
+from brainbulge.studies.tasks import (
+    Task,
+    echo_task,
+    execute,
+    execute_on_worker,
+    one_line,
+    resolve_task,
+    to_json,
+)
 
 __all__ = ["SERIAL", "Task", "echo_task", "run_study", "validate_scenarios"]
 
@@ -74,9 +82,6 @@ logger = logging.getLogger(__name__)
 
 #: ``scheduler`` value for in-process, one-after-the-other execution.
 SERIAL = "serial"
-
-#: ``task(scenario, scenario_dir) -> summary``, or its ``"module:function"`` path.
-Task = Callable[[dict[str, Any], Path], Mapping[str, Any]] | str
 
 #: Scenario names: start with a letter or digit, then letters, digits, ``_``, ``-``, ``.``.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
@@ -108,83 +113,6 @@ STUDY_FILE = "study.json"
 # --------------------------------------------------------------------------- helpers
 
 
-def echo_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
-    """Demo task: writes ``echo.json`` with the scenario and returns it as the summary.
-
-    Raises `InputError` if the scenario has ``"fail": true`` (to exercise error handling).
-    """
-    if scenario.get("fail"):
-        raise InputError(f"scenario {scenario['name']} asked to fail")
-    atomic_write_json(Path(scenario_dir) / "echo.json", _to_json(scenario))
-    return dict(scenario)
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, PurePath):
-        return str(value)
-    if isinstance(value, set | frozenset):
-        return sorted(value)
-    if hasattr(value, "tolist") and callable(value.tolist):  # numpy scalar or array
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
-
-
-def _to_json(value: Any) -> Any:
-    """``value`` as it reads back from JSON (tuples -> lists, paths -> str, numpy -> lists)."""
-    return json.loads(json.dumps(value, default=_json_default, allow_nan=True))
-
-
-def _one_line(exc: BaseException, limit: int = 300) -> str:
-    """A one-line description of ``exc``: its own message for brainbulge errors (already
-    user-facing), ``Type: message`` otherwise."""
-    text = " ".join(str(exc).split())
-    if not isinstance(exc, BrainbulgeError):
-        text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _resolve_task(task: Task) -> Callable[[dict[str, Any], Path], Mapping[str, Any]]:
-    if callable(task):
-        return task
-    module_name, sep, attr = str(task).partition(":")
-    if not sep:
-        module_name, _, attr = str(task).rpartition(".")
-    if not module_name or not attr:
-        raise InputError(f"task {task!r} must be 'package.module:function'")
-    try:
-        func = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
-        raise InputError(f"cannot import task {task!r}: {exc}") from exc
-    if not callable(func):
-        raise InputError(f"task {task!r} is not callable")
-    return func
-
-
-def _execute(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[str, Any]:
-    """Run one scenario (on a worker); never raises for errors of ``task`` itself.
-
-    Returns ``{"ok": True, "summary": {...}}`` or ``{"ok": False, "error", "traceback"}``; the
-    summary is checked to be a JSON-able mapping here, where the failure belongs.
-    """
-    try:
-        func = _resolve_task(task)
-        summary = func(dict(scenario), Path(scenario_dir))
-        if not isinstance(summary, Mapping):
-            raise TypeError(f"task returned {type(summary).__name__}, not a dict summary")
-        return {"ok": True, "summary": _to_json(dict(summary))}
-    except Exception as exc:  # noqa: BLE001 - recorded, the study goes on
-        return {"ok": False, "error": _one_line(exc), "traceback": traceback.format_exc()}
-
-
-def _execute_on_worker(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[str, Any]:
-    """`_execute` in a worker process, after the process-wide tuning of a run
-    (:func:`brainbulge.runtime.configure`: the heap is per process)."""
-    from brainbulge.runtime import configure
-
-    configure()
-    return _execute(task, scenario, scenario_dir)
-
-
 def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Check names (present, filesystem-safe, unique even ignoring case, not reserved) and that
     each scenario is JSON-able; return the scenarios as JSON values. Raises `InputError`."""
@@ -210,7 +138,7 @@ def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
             )
         seen[name.lower()] = name
         try:
-            normalised.append(_to_json(dict(scenario)))
+            normalised.append(to_json(dict(scenario)))
         except (TypeError, ValueError) as exc:
             raise InputError(f"scenario {name!r} is not JSON-serialisable: {exc}") from exc
     return normalised
@@ -393,7 +321,7 @@ def run_study(
     if n_workers is not None and n_workers < 1:
         raise InputError(f"n_workers must be at least 1, not {n_workers}")
     if isinstance(task, str):
-        _resolve_task(task)  # fail early, here, on a typo
+        resolve_task(task)  # fail early, here, on a typo
     elif not callable(task):
         raise InputError(f"task must be a function or 'module:function', not {task!r}")
     out_dir = Path(out_dir)
@@ -421,7 +349,7 @@ def run_study(
             pass
         elif scheduler == SERIAL:
             for i in pending:
-                outcome = _execute(task, dict(scenarios[i]), str(study.scenario_dir(i)))
+                outcome = execute(task, dict(scenarios[i]), str(study.scenario_dir(i)))
                 _finish(study, bar, i, outcome)
         else:
             _run_distributed(study, bar, pending, scenarios, task, scheduler, n_workers)
@@ -479,14 +407,14 @@ def _run_distributed(
                     Client(scheduler, set_as_default=False, timeout=CONNECT_TIMEOUT))
             except (OSError, ValueError) as exc:
                 raise InputError(
-                    f"cannot connect to Dask scheduler {scheduler}: {_one_line(exc)}"
+                    f"cannot connect to Dask scheduler {scheduler}: {one_line(exc)}"
                 ) from exc
 
         index: dict[Any, int] = {}
         futures = []
         for i in pending:
             future = client.submit(
-                _execute_on_worker,
+                execute_on_worker,
                 task,
                 dict(scenarios[i]),
                 str(study.scenario_dir(i)),
@@ -502,7 +430,7 @@ def _run_distributed(
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the worker died
                 outcome = {
                     "ok": False,
-                    "error": _one_line(exc),
+                    "error": one_line(exc),
                     "traceback": "".join(traceback.format_exception(exc)),
                 }
             future.release()
