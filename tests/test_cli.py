@@ -342,7 +342,7 @@ def test_hemidisk_run_and_rerun_from_record(tmp_path) -> None:
 
 def test_version() -> None:
     r = subprocess.run(
-        [sys.executable, "-m", "brainbulge.cli", "--version"], capture_output=True, text=True
+        [sys.executable, "-m", "brainbulge", "--version"], capture_output=True, text=True
     )
     assert r.returncode == 0 and "brainbulge" in r.stdout
 

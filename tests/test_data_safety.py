@@ -243,7 +243,7 @@ def test_a_truncated_restart_file_is_skipped_with_a_warning(tmp_path, caplog) ->
 
 def test_a_study_folder_of_other_scenarios_is_refused_unless_overwrite(tmp_path, capsys,
                                                                        monkeypatch) -> None:
-    import brainbulge.cli.study as study
+    import brainbulge.studies.suites as study
 
     out = tmp_path / "study"
     calls = []
@@ -256,7 +256,7 @@ def test_a_study_folder_of_other_scenarios_is_refused_unless_overwrite(tmp_path,
         calls.append(name)
         return len(scenarios)
 
-    monkeypatch.setattr(study, "run_study_and_report", fake)
+    monkeypatch.setattr(study, "run_named_study", fake)
     argv = ["study", "hemidisk-sector", "--alphas", "20", "--betas", "30", "--out", str(out)]
     assert main(argv) == 0
     assert main(argv) == 0  # the same study resumes

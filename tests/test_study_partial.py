@@ -86,7 +86,7 @@ def test_grid_draws_a_stopped_scenario_labelled(tmp_path, monkeypatch) -> None:
 def test_cli_message_tells_stopped_from_failed(tmp_path) -> None:
     """The study's closing message counts the scenarios that stopped before full load (their
     partial results kept; a rerun repeats them) apart from those that failed otherwise."""
-    from brainbulge.cli.study import incomplete_text
+    from brainbulge.studies.suites import incomplete_text
 
     scenarios, _ = _study(tmp_path)
     (tmp_path / scenarios[0]["name"] / "summary.json").write_text(

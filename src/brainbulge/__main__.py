@@ -1,4 +1,4 @@
-"""``python -m brainbulge.cli``."""
+"""``python -m brainbulge``: the same as the ``brainbulge`` command."""
 
 import sys
 

@@ -33,3 +33,9 @@ class MeshError(BrainbulgeError):
     """A mesh is unusable: inverted or degenerate elements, missing regions (exit code 5)."""
 
     exit_code = 5
+
+
+class StudyIncomplete(BrainbulgeError):
+    """Some scenarios of a study did not complete; those that did are kept (exit code 4)."""
+
+    exit_code = 4

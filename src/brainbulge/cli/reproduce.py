@@ -23,17 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
-from brainbulge.cli.study import StudyIncomplete, incomplete_text, run_study_and_report
+from brainbulge.errors import StudyIncomplete
 from brainbulge.geometry.brain.defaults import FIXATIONS
 from brainbulge.results.run_record import atomic_write_json
-
-#: default 3D mesh size: Netgen at 181k tets, refined once to ~1.4M (the paper: 1.28M)
-PAPER_TETS = 1_450_000
-#: the paper's brain volume [ml]
-PAPER_BRAIN_VOLUME_ML = 1108.0
-#: from this many tets on, the 3D scenarios use a refined mesh, mesh sequencing on the
-#: unrefined one, the Krylov solver and one worker
-LARGE_TETS = 400_000
+from brainbulge.studies.suites import LARGE_TETS, PAPER_TETS
 
 
 def add_parser(sub: Any) -> None:
@@ -53,32 +46,18 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=run_command)
 
 
-def brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, Any]:
-    """The options shared by the six 3D scenarios at ``tets`` tets."""
-    common: dict[str, Any] = {"tets": tets, "brain_volume_ml": PAPER_BRAIN_VOLUME_ML,
-                              "steps": 4, "fix": fix}
-    if tets >= LARGE_TETS:
-        common.update(refine=1, coarse_tets=tets // 8, linear_solver="krylov")
-    return common
-
-
 def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
+    """The three parts, every scenario checked before ``--out`` is touched."""
     from brainbulge.cli import checks
-    from brainbulge.studies import hemidisk as hd
-    from brainbulge.studies.craniectomy import case_from_dict, craniectomy_scenarios
+    from brainbulge.studies.suites import paper_parts
 
     checks.scheduler(args.scheduler)
-    brain = craniectomy_scenarios(**brain_options(args.tets, args.fix))
-    for sc in brain:
-        case_from_dict(sc)  # validate before touching --out
-    return {
-        "sector": hd.sector_scenarios(mesh_size=args.mesh_size, steps=4),
-        "disk": hd.disk_scenarios(mesh_size=args.mesh_size, steps=4),
-        "craniectomy": brain,
-    }
+    return paper_parts(args.tets, args.fix, args.mesh_size)
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from brainbulge.studies.suites import incomplete_text, run_named_study
+
     parts = plan(args)
     out_path = Path(args.out)
     resume = (out_path / "study.json").is_file() and not args.overwrite
@@ -92,7 +71,7 @@ def run_command(args: argparse.Namespace) -> int:
         if part == "craniectomy":
             ok = _run_brain_part(scenarios, out / part, args)
         else:
-            ok = run_study_and_report(names[part], scenarios, out / part, args.scheduler,
+            ok = run_named_study(names[part], scenarios, out / part, args.scheduler,
                                       args.workers)
         if ok < len(scenarios):
             failed += len(scenarios) - ok

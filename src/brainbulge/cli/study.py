@@ -10,9 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run
-from brainbulge.errors import BrainbulgeError, InputError
-
-STUDIES = ("hemidisk-sector", "hemidisk-disk", "craniectomy")
+from brainbulge.errors import InputError, StudyIncomplete
+from brainbulge.studies.suites import STUDIES
 
 
 def add_parser(sub: Any) -> None:
@@ -74,6 +73,7 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
+    from brainbulge.studies.suites import incomplete_text, run_named_study
 
     if args.workers is not None and not 1 <= args.workers <= 256:
         raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
@@ -89,7 +89,7 @@ def run_command(args: argparse.Namespace) -> int:
     out = start_run(
         args, {"command": "study", "study": args.name, "scenarios": scenarios}, resume=resume
     )
-    n_ok = run_study_and_report(args.name, scenarios, out, args.scheduler, args.workers)
+    n_ok = run_named_study(args.name, scenarios, out, args.scheduler, args.workers)
     if n_ok < len(scenarios):
         raise StudyIncomplete(
             f"{len(scenarios) - n_ok} of {len(scenarios)} scenarios did not complete: "
@@ -97,61 +97,3 @@ def run_command(args: argparse.Namespace) -> int:
         )
     finish_run(out)
     return 0
-
-
-def incomplete_text(out: Path, scenarios: list[dict]) -> str:
-    """What became of a study's scenarios that did not complete: those that stopped before
-    full load (Newton diverged; their last converged state is kept in their folders, and for
-    the hemidisk studies in the table and figures too; a rerun computes the same again) and
-    those that failed otherwise (a rerun retries them)."""
-    from brainbulge.studies.runner import ERROR_FILE, stopped_summary
-
-    failed = [sc for sc in scenarios if (out / sc["name"] / ERROR_FILE).is_file()]
-    n_stopped = sum(stopped_summary(out / sc["name"]) is not None for sc in failed)
-    parts = []
-    if n_stopped:
-        parts.append(f"{n_stopped} stopped before full load (their last converged states are "
-                     "kept in their folders; a rerun computes the same again)")
-    if len(failed) > n_stopped:
-        parts.append(f"{len(failed) - n_stopped} failed (rerun the same command to retry them)")
-    return "; ".join(parts or ["rerun the same command to retry them"]) + (
-        f"; see {out}/study.json")
-
-
-class StudyIncomplete(BrainbulgeError):
-    exit_code = 4
-
-
-def run_study_and_report(
-    name: str, scenarios: list[dict], out: Path, scheduler: str | None, workers: int | None
-) -> int:
-    """Run the scenarios, then write ``table.csv`` and the figures; return how many succeeded."""
-    from brainbulge.studies import hemidisk as hd
-    from brainbulge.studies.runner import run_study
-
-    if name == "craniectomy":
-        from brainbulge.studies import craniectomy as cr
-
-        mesh = cr.prepare_study_mesh(out, scenarios[0])
-        scenarios = [{**sc, "mesh": str(mesh)} for sc in scenarios]
-        rows = run_study(scenarios, "brainbulge.studies.craniectomy:study_task", out,
-                         scheduler=scheduler, n_workers=workers)
-        cr.write_comparison(out, scenarios, rows)
-        cr.write_report(out, scenarios, rows)
-        return sum(1 for r in rows if r.get("complete"))
-    rows = run_study(
-        scenarios,
-        "brainbulge.studies.hemidisk:study_task",
-        out,
-        scheduler=scheduler,
-        n_workers=workers,
-    )
-    hd.write_study_table(rows, scenarios, out / "table.csv")
-    if name == "hemidisk-sector":
-        from brainbulge.studies.trends import write_sector_report
-
-        hd.sector_figures(out, scenarios, rows)
-        write_sector_report(out, scenarios, rows)
-    else:
-        hd.disk_figures(out, scenarios, rows)
-    return sum(1 for r in rows if r.get("complete"))
