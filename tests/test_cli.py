@@ -338,6 +338,29 @@ def test_hemidisk_run_and_rerun_from_record(tmp_path) -> None:
     a = json.loads((out / "summary.json").read_text())
     b = json.loads((again / "summary.json").read_text())
     assert a["max_radial_stretch"] == b["max_radial_stretch"]  # bit for bit
+    # physics apart from numerics: what is simulated in [case], how in [solver]
+    import tomllib
+
+    record = tomllib.loads((out / "run.toml").read_text())
+    assert record["case"]["contact"] == "noslip" and record["case"]["alpha"] == 80.0
+    assert record["solver"]["mesh_size"] == 0.15 and "mesh_size" not in record["case"]
+    # a run file of one [hemidisk] table (the older layout) gives the same run
+    old = tmp_path / "old.toml"
+    flat = {**record["case"], **record["solver"]}
+    old.write_text("command = 'hemidisk'\n[hemidisk]\n" + "".join(
+        f"{k} = {json.dumps(v)}\n" for k, v in flat.items() if not isinstance(v, dict)))
+    assert main(["run", str(old), "--out", str(tmp_path / "old")]) == 0
+    c = json.loads((tmp_path / "old" / "summary.json").read_text())
+    assert c["max_radial_stretch"] == a["max_radial_stretch"]
+
+
+def test_run_file_with_an_option_in_both_tables_is_refused(tmp_path, capsys) -> None:
+    cfg = tmp_path / "both.toml"
+    cfg.write_text("command = 'hemidisk'\n[case]\nsteps = 2\n[solver]\nsteps = 3\n")
+    assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "steps given in both [case] and [solver]" in err and "\n" not in err.strip()
+    assert not (tmp_path / "o").exists()
 
 
 def test_version() -> None:

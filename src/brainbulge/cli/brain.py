@@ -10,7 +10,6 @@ run that was stopped (killed, out of time) resumes from its ``restart.npz``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -132,9 +131,11 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def run_case(args: argparse.Namespace, case: Any) -> int:
+    from brainbulge.model.brain import SOLVER_FIELDS
+    from brainbulge.model.problem import case_tables
     from brainbulge.studies.craniectomy import run_brain
 
-    config = {"command": "brain", "brain": _plain(dataclasses.asdict(case))}
+    config = {"command": "brain", **case_tables(case, SOLVER_FIELDS)}
     # a folder with a restart file (a run stopped mid-way) is resumed, unless --overwrite
     resume = (Path(args.out) / "restart.npz").is_file() and not args.overwrite
     out = start_run(args, config, resume=resume)
@@ -148,7 +149,3 @@ def run_case(args: argparse.Namespace, case: Any) -> int:
     )
     return 0
 
-
-def _plain(d: dict[str, Any]) -> dict[str, Any]:
-    """TOML has no null: drop ``None`` values; tuples become lists."""
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if v is not None}

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, progress_bar, start_run
@@ -124,9 +123,11 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def run_case(args: argparse.Namespace, case: Any) -> int:
+    from brainbulge.model.hemidisk import SOLVER_FIELDS
+    from brainbulge.model.problem import case_tables
     from brainbulge.studies.hemidisk import run_hemidisk
 
-    config = {"command": "hemidisk", "hemidisk": dataclasses.asdict(case)}
+    config = {"command": "hemidisk", **case_tables(case, SOLVER_FIELDS)}
     out = start_run(args, config)
     summary = run_hemidisk(case, out, progress=progress_bar())
     finish_run(out)

@@ -4,10 +4,17 @@ The file has the shape of the ``run.toml`` every output folder holds, so a run i
 with ``brainbulge run OUT/run.toml --out NEW``::
 
     command = "hemidisk"
-    [hemidisk]
+
+    [case]        # what is simulated
     alpha = 80.0
     beta = 60.0
     contact = "sliding"
+
+    [solver]      # how it is discretised and solved
+    mesh_size = 0.05
+
+Options left out take their defaults; run files with one ``[hemidisk]`` or ``[brain]`` table
+of all options (written by earlier versions) load too.
 """
 
 from __future__ import annotations
@@ -38,10 +45,10 @@ def run_command(args: argparse.Namespace) -> int:
         raise InputError(
             f"{args.config}: 'command' must be one of {', '.join(COMMANDS)}, got {command!r}"
         )
-    table = config.get(command)
-    if not isinstance(table, dict):
-        raise InputError(f"{args.config}: missing table [{command}] with the case's options")
     from brainbulge.cli import checks
+    from brainbulge.model.problem import case_options
+
+    table = case_options(config, command, str(args.config))
 
     if command == "brain":
         from brainbulge.cli.brain import run_case as run_brain_case

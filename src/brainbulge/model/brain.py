@@ -45,6 +45,11 @@ TISSUE_MATERIAL = {
     "brainstem": "cerebellum",
 }
 
+#: the fields of :class:`CraniectomyCase` that say how it is discretised and solved (the
+#: ``[solver]`` table of a run file); the others say what is simulated (``[case]``)
+SOLVER_FIELDS = ("tets", "refine", "element", "linear_solver", "steps", "tolerance",
+                 "compile", "coarse_tets", "coarse_mesh")
+
 
 @dataclass
 class CraniectomyCase:

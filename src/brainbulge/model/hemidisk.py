@@ -42,6 +42,11 @@ from brainbulge.model.problem import Contact, Problem
 CONTACTS = ("sliding", "noslip")
 SKULLS = ("paper", "rigid")
 
+#: the fields of :class:`HemidiskCase` that say how it is discretised and solved (the
+#: ``[solver]`` table of a run file); the others say what is simulated (``[case]``)
+SOLVER_FIELDS = ("mesh_size", "corner_mesh_size", "rim_mesh_size", "steps", "element",
+                 "rezone", "contact_method")
+
 
 @dataclass
 class HemidiskCase:

@@ -155,3 +155,39 @@ def case_from_config(cls: type[Case], config: dict[str, Any], what: str) -> Case
     except TypeError as err:
         raise InputError(f"invalid {what} options: {err}") from None
 
+
+
+def case_tables(case: Any, solver_fields: tuple[str, ...]) -> dict[str, dict[str, Any]]:
+    """A case dataclass as the two tables of a run file: ``case`` (what is simulated: physics,
+    geometry, outputs) and ``solver`` (how: the discretisation and the solver's numerics,
+    the names ``solver_fields``). ``None`` values are left out (TOML has no null), tuples
+    become lists."""
+    tables: dict[str, dict[str, Any]] = {"case": {}, "solver": {}}
+    for key, value in dataclasses.asdict(case).items():
+        if value is None or (key == "extra" and not value):
+            continue
+        table = "solver" if key in solver_fields else "case"
+        tables[table][key] = list(value) if isinstance(value, tuple) else value
+    return tables
+
+
+def case_options(config: dict[str, Any], command: str, where: str) -> dict[str, Any]:
+    """The flat options of a run file: its ``[case]`` and ``[solver]`` tables, or the one
+    ``[<command>]`` table of files written before the two were separate."""
+    if "case" not in config and "solver" not in config:
+        table = config.get(command)
+        if not isinstance(table, dict):
+            raise InputError(f"{where}: missing the tables [case] and [solver] with the "
+                             "case's options")
+        return dict(table)
+    options: dict[str, Any] = {}
+    for name in ("case", "solver"):
+        table = config.get(name, {})
+        if not isinstance(table, dict):
+            raise InputError(f"{where}: [{name}] must be a table of options")
+        twice = set(options) & set(table)
+        if twice:
+            raise InputError(f"{where}: {', '.join(sorted(twice))} given in both [case] and "
+                             "[solver]; keep one")
+        options.update(table)
+    return options

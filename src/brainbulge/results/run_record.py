@@ -4,7 +4,7 @@ A run's output folder holds, besides its results:
 
 ``run.toml``
     the exact, fully resolved configuration; ``load_config`` reads it back, so
-    ``brainbulge <command> --config out/run.toml`` repeats the run.
+    ``brainbulge run out/run.toml --out NEW`` repeats the run.
 ``run.json``
     provenance: command line, brainbulge / Python / platform / library versions, start time,
     random seed (if the configuration has one) and the git commit of the source tree.
