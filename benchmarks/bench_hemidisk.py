@@ -26,7 +26,7 @@ from pathlib import Path
 def headline(contact: str, skull: str, out: Path) -> dict:
     folder = out / f"headline_{contact}"
     subprocess.run(
-        [sys.executable, "-m", "brainbulge.cli", "hemidisk", "--contact", contact, "--skull",
+        [sys.executable, "-m", "brainbulge", "hemidisk", "--contact", contact, "--skull",
          skull, "--out", str(folder), "--overwrite"],
         check=True, capture_output=True,
     )
@@ -37,7 +37,7 @@ def study(skull: str, workers: int, out: Path) -> tuple[float, int, int]:
     folder = out / "sector"
     t0 = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-m", "brainbulge.cli", "study", "hemidisk-sector", "--skull", skull,
+        [sys.executable, "-m", "brainbulge", "study", "hemidisk-sector", "--skull", skull,
          "--workers", str(workers), "--out", str(folder), "--overwrite"],
         capture_output=True,
     )
