@@ -146,7 +146,7 @@ def _normalised(config: Any) -> Any:
 
     import tomli_w
 
-    from brainbulge.results.run_record import toml_ready
+    from brainbulge.results.config_file import toml_ready
 
     return tomllib.loads(tomli_w.dumps(toml_ready(config)))
 
@@ -173,7 +173,7 @@ def _check_same_run(path: Path, config: dict[str, Any] | None) -> None:
     toml = path / "run.toml"
     if config is None or not toml.is_file():
         return
-    from brainbulge.results.run_record import load_config
+    from brainbulge.results.config_file import load_config
 
     stored, new = load_config(toml), _normalised(config)
     if stored == new:
@@ -389,7 +389,7 @@ class OutputFolder:
 
     def record_files(self) -> None:
         """Write the manifest into ``run.json`` (if the run record exists)."""
-        from brainbulge.results.run_record import atomic_write_json
+        from brainbulge.atomic import atomic_write_json
 
         run_json = self.path / "run.json"
         try:

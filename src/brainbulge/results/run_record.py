@@ -28,18 +28,14 @@ allows: a reader never sees half a file, even after a crash.
 
 from __future__ import annotations
 
-import dataclasses
-import enum
 import os
 import platform
-import re
 import subprocess
 import sys
-import tomllib
 from collections.abc import Mapping
-from datetime import UTC, date, datetime, time
+from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
-from pathlib import Path, PurePath
+from pathlib import Path
 from typing import Any
 
 import tomli_w
@@ -47,6 +43,7 @@ import tomli_w
 from brainbulge import __version__
 from brainbulge.atomic import atomic_output, atomic_write_json, atomic_write_text
 from brainbulge.errors import InputError
+from brainbulge.results.config_file import load_config, toml_ready
 from brainbulge.results.output_folder import RUN_MARKERS, refresh_manifest
 
 __all__ = [
@@ -98,68 +95,6 @@ def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Pat
 
 
 # --------------------------------------------------------------------------- configuration
-
-
-def toml_ready(value: Any, _where: str = "config") -> Any:
-    """Convert a configuration to what TOML can hold.
-
-    Tuples/sets -> lists, paths -> str, enums -> their value, dataclasses -> tables, numpy
-    scalars/arrays -> Python numbers/lists; keys whose value is None are dropped (TOML has no
-    null). Raises TypeError naming the offending key for anything else (or None in a list).
-    """
-    if value is None:
-        raise TypeError(f"{_where}: None inside a list cannot be written to TOML")
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        value = dataclasses.asdict(value)
-    if isinstance(value, Mapping):
-        out = {}
-        for key, item in value.items():
-            if not isinstance(key, str):
-                raise TypeError(f"{_where}: key {key!r} is not a string")
-            if item is None:
-                continue
-            out[key] = toml_ready(item, f"{_where}.{key}")
-        return out
-    if isinstance(value, enum.Enum):
-        return toml_ready(value.value, _where)
-    if isinstance(value, bool | int | float | str | datetime | date | time):
-        return value
-    if isinstance(value, PurePath):
-        return str(value)
-    if hasattr(value, "tolist") and callable(value.tolist):  # numpy scalar or array
-        return toml_ready(value.tolist(), _where)
-    if isinstance(value, list | tuple):
-        return [toml_ready(item, f"{_where}[{i}]") for i, item in enumerate(value)]
-    if isinstance(value, set | frozenset):
-        return [toml_ready(item, f"{_where}[]") for item in sorted(value)]
-    raise TypeError(f"{_where}: {type(value).__name__} cannot be written to TOML")
-
-
-def load_config(path: Path) -> dict[str, Any]:
-    """Read a TOML configuration file; `InputError` (one line, with the line number of a
-    syntax error) if it is missing, unreadable or not valid TOML."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read config {path}: {exc.strerror or exc}") from exc
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError(
-            f"config {path} is not UTF-8 text (byte {exc.start}); save it as UTF-8"
-        ) from exc
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else "syntax error"
-        lineno = getattr(exc, "lineno", None)  # attribute exists from Python 3.14 on
-        if lineno is None:
-            found = re.search(r"line (\d+)", msg)
-            lineno = int(found.group(1)) if found else None
-        msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)\s*$", "", msg)
-        where = f"line {lineno}" if lineno is not None else "end of file"
-        raise InputError(f"invalid TOML in {path}, {where}: {msg}") from exc
 
 
 # --------------------------------------------------------------------------- provenance

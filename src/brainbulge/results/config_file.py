@@ -1,0 +1,81 @@
+"""Configuration files: a configuration as TOML can hold it, and a TOML file read back with
+one-line errors.
+
+>>> toml_ready({"mesh": (1, 2), "seed": None})
+{'mesh': [1, 2]}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import re
+import tomllib
+from collections.abc import Mapping
+from datetime import date, datetime, time
+from pathlib import Path, PurePath
+from typing import Any
+
+from brainbulge.errors import InputError
+
+
+def toml_ready(value: Any, _where: str = "config") -> Any:
+    """Convert a configuration to what TOML can hold.
+
+    Tuples/sets -> lists, paths -> str, enums -> their value, dataclasses -> tables, numpy
+    scalars/arrays -> Python numbers/lists; keys whose value is None are dropped (TOML has no
+    null). Raises TypeError naming the offending key for anything else (or None in a list).
+    """
+    if value is None:
+        raise TypeError(f"{_where}: None inside a list cannot be written to TOML")
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = dataclasses.asdict(value)
+    if isinstance(value, Mapping):
+        out = {}
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise TypeError(f"{_where}: key {key!r} is not a string")
+            if item is None:
+                continue
+            out[key] = toml_ready(item, f"{_where}.{key}")
+        return out
+    if isinstance(value, enum.Enum):
+        return toml_ready(value.value, _where)
+    if isinstance(value, bool | int | float | str | datetime | date | time):
+        return value
+    if isinstance(value, PurePath):
+        return str(value)
+    if hasattr(value, "tolist") and callable(value.tolist):  # numpy scalar or array
+        return toml_ready(value.tolist(), _where)
+    if isinstance(value, list | tuple):
+        return [toml_ready(item, f"{_where}[{i}]") for i, item in enumerate(value)]
+    if isinstance(value, set | frozenset):
+        return [toml_ready(item, f"{_where}[]") for item in sorted(value)]
+    raise TypeError(f"{_where}: {type(value).__name__} cannot be written to TOML")
+
+
+def load_config(path: Path) -> dict[str, Any]:
+    """Read a TOML configuration file; `InputError` (one line, with the line number of a
+    syntax error) if it is missing, unreadable or not valid TOML."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read config {path}: {exc.strerror or exc}") from exc
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"config {path} is not UTF-8 text (byte {exc.start}); save it as UTF-8"
+        ) from exc
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else "syntax error"
+        lineno = getattr(exc, "lineno", None)  # attribute exists from Python 3.14 on
+        if lineno is None:
+            found = re.search(r"line (\d+)", msg)
+            lineno = int(found.group(1)) if found else None
+        msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)\s*$", "", msg)
+        where = f"line {lineno}" if lineno is not None else "end of file"
+        raise InputError(f"invalid TOML in {path}, {where}: {msg}") from exc
