@@ -25,15 +25,13 @@ from typing import Any
 from brainbulge.cli import add_output_options, finish_run, start_run
 from brainbulge.cli.study import StudyIncomplete, incomplete_text, run_study_and_report
 from brainbulge.geometry.brain.defaults import FIXATIONS
+from brainbulge.model.brain import LARGE_TETS, size_defaults
 from brainbulge.results.run_record import atomic_write_json
 
 #: default 3D mesh size: Netgen at 181k tets, refined once to ~1.4M (the paper: 1.28M)
 PAPER_TETS = 1_450_000
 #: the paper's brain volume [ml]
 PAPER_BRAIN_VOLUME_ML = 1108.0
-#: from this many tets on, the 3D scenarios use a refined mesh, mesh sequencing on the
-#: unrefined one, the Krylov solver and one worker
-LARGE_TETS = 400_000
 
 
 def add_parser(sub: Any) -> None:
@@ -57,8 +55,9 @@ def brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, Any]:
     """The options shared by the six 3D scenarios at ``tets`` tets."""
     common: dict[str, Any] = {"tets": tets, "brain_volume_ml": PAPER_BRAIN_VOLUME_ML,
                               "steps": 4, "fix": fix}
-    if tets >= LARGE_TETS:
-        common.update(refine=1, coarse_tets=tets // 8, linear_solver="krylov")
+    if tets >= LARGE_TETS:  # a refined mesh, sequencing on the unrefined one, Krylov
+        refine, coarse_tets, solver = size_defaults(tets)
+        common.update(refine=refine, coarse_tets=coarse_tets, linear_solver=solver)
     return common
 
 
