@@ -27,6 +27,7 @@ from brainbulge.geometry.brain.defaults import (
     SUPERIOR_ELEVATION_DEG,
     SUPERIOR_WIDTH_MM,
 )
+from brainbulge.model.brain import LARGE_TETS
 
 
 def add_parser(sub: Any) -> None:
@@ -62,15 +63,17 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--tolerance", type=positive_float("--tolerance"), default=1e-9,
                    help="Newton's tolerance on the scaled residual at full load (default 1e-9)")
     p.add_argument("--element", choices=("mini", "taylor-hood"), default="mini")
-    p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="pardiso",
-                   help="direct, or GMRES with AMG blocks for large meshes")
+    p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default=None,
+                   help="direct, or GMRES with AMG blocks (default: from the size, krylov "
+                   f"from {LARGE_TETS:,} tets)")
     p.add_argument("--coarse-tets", type=int, default=None,
                    help="mesh sequencing: solve first on a mesh of about this many tets, then "
-                   "finish on the fine mesh from its solution (MINI; e.g. tets / 14 for "
-                   "meshes of a million tets and more)")
-    p.add_argument("--refine", type=int, default=0,
+                   "finish on the fine mesh from its solution (MINI; 0: none; default from "
+                   f"{LARGE_TETS:,} tets: tets / 8^refine, the unrefined mesh)")
+    p.add_argument("--refine", type=int, default=None,
                    help="mesh at tets / 8^K and refine it uniformly K times (0-3); with "
-                   "--coarse-tets tets / 8^K the sequencing meshes are nested")
+                   "--coarse-tets tets / 8^K the sequencing meshes are nested (default: 1 "
+                   f"from {LARGE_TETS:,} tets, else 0)")
     p.add_argument("--coarse-mesh", default=None,
                    help="mesh sequencing with this brain.npz as the coarse mesh (with --mesh)")
     p.add_argument("--material", default="paper", help="tissue preset: paper or paper-pa")

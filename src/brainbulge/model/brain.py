@@ -36,6 +36,33 @@ from brainbulge.model.problem import Contact, Problem
 FLAPS = ("frontal", "left", "right", "custom", "none")
 SWELL_SIDES = {"both": ("left", "right"), "left": ("left",), "right": ("right",)}
 
+#: from this many requested tets up the defaults are those of a large mesh
+#: (:func:`size_defaults`): below it PARDISO on one Netgen mesh is quicker and lighter
+LARGE_TETS = 400_000
+
+
+def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None = None,
+                  linear_solver: str | None = None, element: str = "mini",
+                  mesh_given: bool = False) -> tuple[int, int | None, str]:
+    """``(refine, coarse_tets, linear_solver)`` for a mesh of about ``tets`` tets; each
+    argument given (not None) is kept as it is.
+
+    From :data:`LARGE_TETS` up: Netgen at ``tets / 8``, refined once (``refine = 1``), mesh
+    sequencing from that unrefined, nested mesh (``coarse_tets = tets // 8**refine``: no
+    second Netgen run) and GMRES with AMG blocks (``krylov``); below it: one Netgen mesh,
+    no sequencing, PARDISO. ``coarse_tets = 0`` turns sequencing off. A mesh read from a
+    file (``mesh_given``) is not refined or sequenced unless asked; sequencing needs MINI.
+    """
+    large = tets >= LARGE_TETS and not mesh_given
+    if refine is None:
+        refine = 1 if large else 0
+    if linear_solver is None:
+        linear_solver = "krylov" if large else "pardiso"
+    if coarse_tets is None and large and refine > 0 and element == "mini":
+        coarse_tets = tets // 8**refine
+    return refine, coarse_tets or None, linear_solver
+
+
 #: tissue -> row of the material table used for it
 TISSUE_MATERIAL = {
     "gray": "gray",
@@ -70,7 +97,8 @@ class CraniectomyCase:
         material: material preset (``paper`` or ``paper-pa``).
         element: ``mini`` (P1 + bubble / P1) or ``taylor-hood`` (P2 / P1).
         linear_solver: ``pardiso`` (direct) or ``krylov`` (GMRES + AMG blocks, for large
-            meshes; with Taylor-Hood a two-level cycle on the P2 block).
+            meshes; with Taylor-Hood a two-level cycle on the P2 block); None: from the size
+            (:func:`size_defaults`, as ``refine`` and ``coarse_tets``).
         steps: initial load steps.
         tolerance: Newton's stopping tolerance at full load, on the scaled residual (force /
             (mu L^2), volume / |Omega|; :class:`~brainbulge.solver.SolverOptions`) [-].
@@ -83,7 +111,8 @@ class CraniectomyCase:
             mid-sagittal plane [mm] and its lowest elevation seen from the brain centre [deg].
         coarse_tets: mesh sequencing (:mod:`brainbulge.solver.sequencing`): ramp the load
             first on a mesh of about this many tets of the same geometry, then start the fine
-            mesh's Newton at full load from its solution (MINI only; fewer fine iterations).
+            mesh's Newton at full load from its solution (MINI only; fewer fine iterations);
+            0: none.
         coarse_mesh: the same with a ``brain.npz`` as the coarse mesh (with ``mesh``).
         refine: build the mesh at about ``tets / 8**refine`` tets and refine it uniformly
             ``refine`` times (new surface nodes on the skull's inner surface). With
@@ -105,7 +134,7 @@ class CraniectomyCase:
     fibres: str | None = None
     material: str = "paper"
     element: str = "mini"
-    linear_solver: str = "pardiso"
+    linear_solver: str | None = None
     steps: int = 4
     tolerance: float = 1e-9
     compile: bool = True
@@ -116,7 +145,7 @@ class CraniectomyCase:
     superior_elevation_deg: float = SUPERIOR_ELEVATION_DEG
     coarse_tets: int | None = None
     coarse_mesh: str | None = None
-    refine: int = 0
+    refine: int | None = None
     name: str = ""
     extra: dict = field(default_factory=dict)
 
@@ -131,14 +160,20 @@ class CraniectomyCase:
             )
         if not (isinstance(self.swelling, (int, float)) and 0.5 <= self.swelling <= 2.0):
             raise InputError(f"swelling Js = {self.swelling!r} must lie in [0.5, 2] (paper: 1.1)")
+        if not (isinstance(self.tets, int) and 1_000 <= self.tets <= 5_000_000):
+            raise InputError(f"tets = {self.tets!r} must be a whole number in [1000, 5000000]")
+        coarse = self.coarse_tets
+        if self.coarse_mesh is not None and coarse is None:
+            coarse = 0  # the coarse mesh is given: no coarse size of the defaults' own
+        self.refine, self.coarse_tets, self.linear_solver = size_defaults(
+            self.tets, self.refine, coarse, self.linear_solver, self.element,
+            self.mesh is not None)
         if self.linear_solver not in ("pardiso", "krylov"):
             raise InputError(f"linear solver {self.linear_solver!r}: choose pardiso or krylov")
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
         if not (isinstance(self.tolerance, (int, float)) and 0 < self.tolerance <= 1e-3):
             raise InputError(f"tolerance = {self.tolerance!r} must lie in (0, 1e-3] (default 1e-9)")
-        if not (isinstance(self.tets, int) and 1_000 <= self.tets <= 5_000_000):
-            raise InputError(f"tets = {self.tets!r} must be a whole number in [1000, 5000000]")
         if self.element not in ("mini", "taylor-hood"):
             raise InputError(f"unknown element {self.element!r}; choose mini or taylor-hood")
         tissue_materials(self.material)  # an unknown preset fails here, before any meshing
@@ -173,6 +208,13 @@ class CraniectomyCase:
             raise InputError(f"fibre image {self.fibres} does not exist")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
+
+    @property
+    def nested_coarse(self) -> bool:
+        """The coarse mesh of sequencing is the Netgen mesh that the fine one refines
+        (``coarse_tets = tets // 8**refine``): built once, no second Netgen run."""
+        return (self.mesh is None and bool(self.refine) and self.coarse_tets is not None
+                and self.coarse_tets == self.tets // 8**self.refine)
 
     def superior_band(self) -> SuperiorBand | None:
         """The fixed superior band, or None with ``fix = "inferior"``."""
@@ -219,17 +261,21 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
                 kwargs["custom_flap_diameter_mm"] = case.flap_diameter_mm
         bm = build_brain_mesh(image, target_tets=case.tets,
                               brain_volume_ml=case.brain_volume_ml, refinements=case.refine,
-                              **kwargs)
+                              keep_unrefined=case.nested_coarse, **kwargs)
     if case.flap != "none" and case.flap not in bm.flaps:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
                          f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
     return bm
 
 
-def coarse_brain_mesh_for(case: CraniectomyCase) -> BrainMesh | None:
-    """The coarse mesh of mesh sequencing (``coarse_tets`` or ``coarse_mesh``), or None."""
+def coarse_brain_mesh_for(case: CraniectomyCase, fine: BrainMesh | None = None
+                          ) -> BrainMesh | None:
+    """The coarse mesh of mesh sequencing (``coarse_tets`` or ``coarse_mesh``), or None;
+    the ``unrefined`` mesh of ``fine`` when the two are nested (``case.nested_coarse``)."""
     if case.coarse_tets is None and case.coarse_mesh is None:
         return None
+    if case.nested_coarse and fine is not None and fine.unrefined is not None:
+        return fine.unrefined
     if case.coarse_mesh is not None:
         coarse = replace(case, mesh=case.coarse_mesh, coarse_mesh=None)
     else:

@@ -50,6 +50,7 @@ from brainbulge.model.brain import (
     brain_mesh_for,
     brain_problem,
     coarse_brain_mesh_for,
+    size_defaults,
 )
 from brainbulge.model.problem import case_from_config
 from brainbulge.results.brain_metrics import brain_volume_ml, bulge_volume_ml
@@ -118,7 +119,7 @@ def run_brain(
         coarse_bm = None
     else:
         coarse_bm = coarse_brain_mesh if coarse_brain_mesh is not None else (
-            coarse_brain_mesh_for(case))
+            coarse_brain_mesh_for(case, bm))
     if coarse_bm is not None:
         _check_same_domain(coarse_bm, bm)
         coarse = MixedForm(brain_problem(coarse_bm, case), element=case.element,
@@ -323,10 +324,16 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any], folder: str = "mes
                 "resume with the same mesh options or pass --overwrite"
             )
         return path
-    case = case_from_dict({k: v for k, v in common.items()
-                           if k not in ("mesh", "coarse_tets", "coarse_mesh")})
-    save_brain_mesh(brain_mesh_for(case), path.parent)
+    case = case_from_dict({k: v for k, v in common.items() if k not in ("mesh", "coarse_mesh")})
+    bm = brain_mesh_for(case)
+    save_brain_mesh(bm, path.parent)
     atomic_write_text(spec_path, json.dumps(spec))
+    if bm.unrefined is not None:  # the nested coarse mesh of sequencing, from the same Netgen run
+        coarse = {**common, "tets": case.coarse_tets, "refine": None}
+        coarse_dir = Path(out_dir) / "coarse-mesh"
+        save_brain_mesh(bm.unrefined, coarse_dir)
+        atomic_write_text(coarse_dir / "spec.json", json.dumps(
+            json.loads(json.dumps({k: coarse.get(k) for k in keys}))))
     return path
 
 
@@ -335,14 +342,27 @@ def attach_study_meshes(out_dir: Path, scenarios: list[dict[str, Any]]) -> list[
     first scenario's mesh options, which are then dropped) and, for mesh sequencing with
     ``coarse_tets``, ``coarse_mesh`` (built once at that size, unrefined: with ``coarse_tets =
     tets / 8**refine`` the Netgen mesh that the fine one refines)."""
+    if not scenarios[0].get("mesh"):  # the defaults of the requested size, for all
+        scenarios = [_with_size_defaults(sc) for sc in scenarios]
     common = scenarios[0]
     mesh = prepare_study_mesh(out_dir, common)
     shared: dict[str, Any] = {"mesh": str(mesh)}
     if common.get("coarse_tets") and not common.get("mesh"):
-        coarse = {**common, "tets": common["coarse_tets"], "refine": 0}
+        coarse = {**common, "tets": common["coarse_tets"], "refine": 0, "coarse_tets": None}
         shared["coarse_mesh"] = str(prepare_study_mesh(out_dir, coarse, "coarse-mesh"))
     drop = (*MESH_OPTIONS, "coarse_tets")
     return [{**{k: v for k, v in sc.items() if k not in drop}, **shared} for sc in scenarios]
+
+
+def _with_size_defaults(scenario: dict[str, Any]) -> dict[str, Any]:
+    """``scenario`` with ``refine``, ``coarse_tets`` and ``linear_solver`` of its size
+    (:func:`~brainbulge.model.brain.size_defaults`) where it does not give them."""
+    coarse = scenario.get("coarse_tets")
+    refine, coarse, solver = size_defaults(
+        scenario.get("tets", CraniectomyCase.tets), scenario.get("refine"),
+        0 if coarse is None and scenario.get("coarse_mesh") else coarse,
+        scenario.get("linear_solver"), scenario.get("element", "mini"))
+    return {**scenario, "refine": refine, "coarse_tets": coarse, "linear_solver": solver}
 
 
 def run_study_with_report(out_dir: Path, scenarios: list[dict[str, Any]],

@@ -14,6 +14,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from brainbulge.model.brain import LARGE_TETS, size_defaults
+
 STUDIES = ("hemidisk-sector", "hemidisk-disk", "craniectomy")
 
 #: default 3D mesh size of the reproduction: Netgen at ~181k tets, refined once to ~1.4M
@@ -21,9 +23,6 @@ STUDIES = ("hemidisk-sector", "hemidisk-disk", "craniectomy")
 PAPER_TETS = 1_450_000
 #: the paper's brain volume [ml]
 PAPER_BRAIN_VOLUME_ML = 1108.0
-#: from this many tets on, the 3D scenarios use a refined mesh, mesh sequencing on the
-#: unrefined one, the Krylov solver and one worker
-LARGE_TETS = 400_000
 
 
 def run_named_study(name: str, scenarios: list[dict], out: Path, scheduler: str | None,
@@ -111,8 +110,9 @@ def paper_brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, 
     """The options shared by the reproduction's six 3D scenarios at ``tets`` tets."""
     common: dict[str, Any] = {"tets": tets, "brain_volume_ml": PAPER_BRAIN_VOLUME_ML,
                               "steps": 4, "fix": fix}
-    if tets >= LARGE_TETS:
-        common.update(refine=1, coarse_tets=tets // 8, linear_solver="krylov")
+    if tets >= LARGE_TETS:  # a refined mesh, sequencing on the unrefined one, Krylov
+        refine, coarse_tets, solver = size_defaults(tets)
+        common.update(refine=refine, coarse_tets=coarse_tets, linear_solver=solver)
     return common
 
 

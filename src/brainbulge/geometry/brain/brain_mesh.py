@@ -73,6 +73,8 @@ class BrainMesh:
     voxel_volumes_ml: dict[str, float] = field(default_factory=dict)
     timings_s: dict[str, float] = field(default_factory=dict)
     midsagittal: MidSagittalPlane = field(default_factory=MidSagittalPlane)
+    #: the Netgen mesh this one was refined from, labelled alike (``keep_unrefined``)
+    unrefined: BrainMesh | None = field(default=None, repr=False, compare=False)
 
     def tet_volumes_mm3(self) -> np.ndarray:
         """Volume of each tet (mm^3)."""
@@ -175,6 +177,7 @@ def build_brain_mesh(
     frontal_area_ratio: float = 2.0,
     refinements: int = 0,
     refine_onto_envelope: bool = True,
+    keep_unrefined: bool = False,
 ) -> BrainMesh:
     """Build the labelled brain mesh (see module docstring).
 
@@ -225,7 +228,7 @@ def build_brain_mesh(
                          "too coarse for the brain): ask for fewer refinements or more tets")
     t0 = time.perf_counter()
     h_mm = element_size_for(envelope.volume_ml(), target_tets / 8**refinements)
-    nodes, tets = mesh_intracranial_volume(envelope, h_mm)
+    nodes, tets = netgen_mesh = mesh_intracranial_volume(envelope, h_mm)
     timings["tetmesh"] = time.perf_counter() - t0
     if refinements:
         t0 = time.perf_counter()
@@ -234,13 +237,30 @@ def build_brain_mesh(
         timings["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    if base_z_mm is None:
+        z = nodes[:, 2]
+        base_z_mm = float(z.min() + BASE_FRACTION * (z.max() - z.min()))
+    def label(nodes: np.ndarray, tets: np.ndarray) -> BrainMesh:
+        return _labelled(nodes, tets, image, envelope, midsagittal, base_z_mm,
+                         custom_flap_centre_mm, custom_flap_diameter_mm, frontal_area_ratio)
+
+    mesh = label(nodes, tets)
+    if keep_unrefined and refinements:
+        mesh.unrefined = label(*netgen_mesh)
+    timings["tags"] = time.perf_counter() - t0
+    mesh.timings_s = timings
+    return mesh
+
+
+def _labelled(nodes: np.ndarray, tets: np.ndarray, image: TissueImage,
+              envelope: IntracranialEnvelope, midsagittal: MidSagittalPlane, base_z_mm: float,
+              custom_flap_centre_mm: tuple[float, float, float] | None,
+              custom_flap_diameter_mm: float, frontal_area_ratio: float) -> BrainMesh:
+    """``(nodes, tets)`` with tissues, sides, the base below ``base_z_mm`` and the flaps."""
     tissue = tag_tissue(image, nodes, tets, intracranial_volume_ml=envelope.volume_ml(),
                         plane=midsagittal)
     side = midsagittal.side(nodes[tets].mean(axis=1))
     faces, face_tet = boundary_faces(tets)
-    z = nodes[:, 2]
-    if base_z_mm is None:
-        base_z_mm = float(z.min() + BASE_FRACTION * (z.max() - z.min()))
     base = nodes[faces][:, :, 2].mean(axis=1) < base_z_mm
     voxel = image.volumes_ml()
     voxel["csf"] = envelope.volume_ml() - sum(v for k, v in voxel.items() if k != "csf")
@@ -252,8 +272,6 @@ def build_brain_mesh(
     mesh.add_flap(frontal_flap(envelope, nodes, faces, ~base, frontal_area_ratio))
     if custom_flap_centre_mm is not None:
         mesh.add_flap(custom_flap(envelope, custom_flap_centre_mm, custom_flap_diameter_mm))
-    timings["tags"] = time.perf_counter() - t0
-    mesh.timings_s = timings
     check_brain_mesh(mesh)
     return mesh
 

@@ -1,0 +1,84 @@
+"""The defaults chosen from the requested mesh size, and explicit options over them."""
+
+from __future__ import annotations
+
+import types
+
+import pytest
+
+from brainbulge.cli import build_parser
+from brainbulge.cli.brain import config_from_args
+from brainbulge.errors import InputError
+from brainbulge.model.brain import (
+    LARGE_TETS,
+    CraniectomyCase,
+    coarse_brain_mesh_for,
+    size_defaults,
+)
+from brainbulge.studies.craniectomy import _with_size_defaults
+
+
+@pytest.mark.parametrize("tets", [30_000, 100_000, LARGE_TETS - 1])
+def test_small_meshes_keep_one_netgen_mesh_and_pardiso(tets) -> None:
+    assert size_defaults(tets) == (0, None, "pardiso")
+
+
+@pytest.mark.parametrize("tets", [LARGE_TETS, 1_400_000, 3_000_000])
+def test_large_meshes_refine_once_sequence_from_the_unrefined_mesh_with_krylov(tets) -> None:
+    assert size_defaults(tets) == (1, tets // 8, "krylov")
+
+
+def test_explicit_options_win() -> None:
+    assert size_defaults(1_400_000, linear_solver="pardiso") == (1, 175_000, "pardiso")
+    assert size_defaults(1_400_000, refine=2) == (2, 1_400_000 // 64, "krylov")
+    assert size_defaults(1_400_000, refine=0) == (0, None, "krylov")  # nothing to nest in
+    assert size_defaults(1_400_000, coarse_tets=100_000) == (1, 100_000, "krylov")
+    assert size_defaults(1_400_000, coarse_tets=0) == (1, None, "krylov")  # 0: no sequencing
+    assert size_defaults(100_000, refine=1, linear_solver="krylov") == (1, None, "krylov")
+    assert size_defaults(100_000, coarse_tets=30_000) == (0, 30_000, "pardiso")
+
+
+def test_a_given_mesh_or_taylor_hood_is_not_sequenced_unasked() -> None:
+    assert size_defaults(1_400_000, mesh_given=True) == (0, None, "pardiso")
+    assert size_defaults(1_400_000, element="taylor-hood") == (1, None, "krylov")
+
+
+def test_the_case_resolves_its_defaults_and_knows_its_nested_coarse_mesh() -> None:
+    large = CraniectomyCase(tets=1_400_000)
+    assert (large.refine, large.coarse_tets, large.linear_solver) == (1, 175_000, "krylov")
+    assert large.nested_coarse
+    small = CraniectomyCase(tets=30_000)
+    assert (small.refine, small.coarse_tets, small.linear_solver) == (0, None, "pardiso")
+    assert not small.nested_coarse
+    other = CraniectomyCase(tets=1_400_000, coarse_tets=100_000, linear_solver="pardiso")
+    assert (other.coarse_tets, other.linear_solver, other.nested_coarse) == (
+        100_000, "pardiso", False)
+    assert CraniectomyCase(tets=1_400_000, coarse_tets=0).coarse_tets is None
+    with pytest.raises(InputError, match="coarse_tets"):
+        CraniectomyCase(tets=1_400_000, coarse_tets=1_400_000)
+
+
+def test_the_nested_coarse_mesh_is_the_fine_meshs_unrefined_one() -> None:
+    unrefined = object()
+    fine = types.SimpleNamespace(unrefined=unrefined)
+    assert coarse_brain_mesh_for(CraniectomyCase(tets=1_400_000), fine) is unrefined
+    assert coarse_brain_mesh_for(CraniectomyCase(tets=30_000), fine) is None
+
+
+def test_the_command_line_passes_only_what_the_user_gave() -> None:
+    parse = build_parser().parse_args
+    cfg = config_from_args(parse(["brain", "--tets", "1400000", "--out", "x"]))
+    assert (cfg["refine"], cfg["coarse_tets"], cfg["linear_solver"]) == (None, None, None)
+    case = CraniectomyCase(**{k: v for k, v in cfg.items() if v is not None})
+    assert (case.refine, case.coarse_tets, case.linear_solver) == (1, 175_000, "krylov")
+    cfg = config_from_args(parse(["brain", "--tets", "1400000", "--linear-solver", "pardiso",
+                                  "--refine", "0", "--out", "x"]))
+    case = CraniectomyCase(**{k: v for k, v in cfg.items() if v is not None})
+    assert (case.refine, case.coarse_tets, case.linear_solver) == (0, None, "pardiso")
+
+
+def test_a_study_takes_the_defaults_of_its_size() -> None:
+    sc = _with_size_defaults({"tets": 1_400_000, "flap": "left"})
+    assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (1, 175_000, "krylov")
+    sc = _with_size_defaults({"tets": 1_400_000, "linear_solver": "pardiso", "refine": 0})
+    assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (0, None, "pardiso")
