@@ -42,8 +42,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from toy_brain import toy_labels  # noqa: E402
 
 BAND = SuperiorBand()
-#: the toy head is 12 x 10 x 9 cm: flaps of 6-8 cm are its 12-16 cm
-SMALL, LARGE = 60.0, 80.0
+#: the toy head is 12 x 10 x 9 cm: flaps of 7-8 cm are its 12-14 cm
+SMALL, LARGE = 70.0, 80.0
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def test_refused_flaps_stay_in_the_plan_marked(toy) -> None:
     mesh, bm = toy
     low = bm.envelope.centre_mm() + np.array([-60.0, 0.0, -25.0])
     cases = plan_cases(_base(mesh), bm, [low], [SMALL, 90.0])
-    assert [c.name for c in cases] == ["c00-d60", "c00-d90"]
+    assert [c.name for c in cases] == ["c00-d70", "c00-d90"]
     assert "fixed base" in cases[1].extra["refused"]
     with pytest.raises(InputError, match="fits"):
         run_plan(cases[1:], Path(mesh).parent / "nothing", scheduler="serial")
@@ -171,7 +171,7 @@ def plan(toy, tmp_path_factory):
 
 def test_plan_writes_its_table_figures_and_report(plan) -> None:
     out, cases, rows = plan
-    assert [c.name for c in cases] == ["c00-d60", "c00-d80"]  # smallest first
+    assert [c.name for c in cases] == ["c00-d70", "c00-d80"]  # smallest first
     for f in ("plan.csv", "pareto.png", "centres.png", "report.md", "study.json"):
         assert (out / f).is_file(), f
     for c in cases:
@@ -190,9 +190,9 @@ def test_plan_writes_its_table_figures_and_report(plan) -> None:
 
 def test_the_larger_flap_starts_from_the_smaller_one_and_lowers_the_bulge(plan) -> None:
     _, _, rows = plan
-    small, large = rows["c00-d60"], rows["c00-d80"]
+    small, large = rows["c00-d70"], rows["c00-d80"]
     assert small["warm_start_from"] is None
-    assert large["warm_start_from"] == "c00-d60" and large["warm_start_converged"]
+    assert large["warm_start_from"] == "c00-d70" and large["warm_start_converged"]
     assert large["max_displacement"] < small["max_displacement"]
     # the strained volume does not grow beyond the estimate's resolution (one tet's share)
     assert large["strained_volume_ml"] <= small["strained_volume_ml"] + 0.5
