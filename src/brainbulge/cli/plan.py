@@ -96,7 +96,9 @@ def run_command(args: argparse.Namespace) -> int:
         require(args.swell != "both" or args.centres % 2 == 0,
                 f"--centres {args.centres} must be even with --swell both (half on each side)")
     for c in args.centre or []:
-        checks.flap_centre(c)
+        require(all(abs(v) <= checks.FLAP_CENTRE_MM for v in c),
+                f"--centre {' '.join(f'{v:g}' for v in c)} is not near the skull: give a "
+                f"point on it, each coordinate within +-{checks.FLAP_CENTRE_MM:g} mm (RAS)")
     checks.number("--threshold", args.threshold, 1e-3, 1.0)
     if args.workers is not None:
         checks.number("--workers", args.workers, 1, 256, integer=True)

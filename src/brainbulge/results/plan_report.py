@@ -141,7 +141,7 @@ def write_pareto_figure(path: Path, rows: list[dict[str, Any]]) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7.5))
+    fig, axes = plt.subplots(2, 3, figsize=(14, 8), layout="constrained")
     sc = None
     for ax, (key, (label, unit)) in zip(axes.ravel(), MEASURES.items(), strict=True):
         ok = _ok(rows, key)
@@ -267,7 +267,7 @@ def report_text(rows: list[dict[str, Any]], base: CraniectomyCase, threshold: fl
                      if r["diameter_mm"] == GUIDELINE_DIAMETER_MM]
         least_row = min(_ok(rows, PRIMARY), key=lambda r: r[PRIMARY])
         lines += [
-            f"**{best['name']}**: a {best['diameter_mm']:g} mm flap centred at "
+            f"**{best['name']}**: the flap of {best['diameter_mm']:g} mm centred at "
             f"({best['centre_x_mm']:.0f}, {best['centre_y_mm']:.0f}, "
             f"{best['centre_z_mm']:.0f}) mm, {best['flap_area_cm2']:.1f} cm2, strained "
             f"volume {best[PRIMARY]:.2f} ml.",
