@@ -245,3 +245,40 @@ def test_left_swelling_is_best_relieved_on_the_left_and_a_mirrored_flap_mirrors(
     assert a["midline_shift_mm"] == pytest.approx(-b["midline_shift_mm"], rel=0.2, abs=0.05)
     for key in ("strained_volume_ml", "max_displacement", "p99_principal_strain"):
         assert a[key] == pytest.approx(b[key], rel=0.1, abs=0.3), key
+
+
+# --- the command -------------------------------------------------------------------------
+@pytest.mark.parametrize("argv, message", [
+    (["--swell", "left", "--diameters", "300"], "[40, 200] mm"),
+    (["--swell", "left", "--diameters", "100", "100"], "repeats"),
+    (["--swell", "both", "--centres", "3"], "even"),
+    (["--swell", "left", "--centres", "0"], "--centres"),
+    (["--swell", "left", "--centre", "500", "0", "0"], "--centre 500 0 0"),
+    (["--swell", "left", "--threshold", "2"], "--threshold"),
+    (["--swell", "left", "--mesh", "missing/brain.npz"], "does not exist"),
+    (["--swell", "left", "--label-map", "m.json"], "--labels"),
+    (["--swell", "left", "--scheduler", "not a url"], "scheduler"),
+])
+def test_bad_input_is_one_line_before_out_is_touched(argv, message, tmp_path, capsys) -> None:
+    from brainbulge.cli import main
+
+    out = tmp_path / "plan"
+    assert main(["plan", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_the_command_end_to_end(toy, tmp_path, capsys) -> None:
+    from brainbulge.cli import main
+
+    mesh, bm = toy
+    c = convexity_centres(bm, "left", 1, BAND)[0]
+    out = tmp_path / "plan"
+    argv = ["plan", "--swell", "left", "--mesh", mesh, "--centre", *map(str, c), "--diameters",
+            "70", "80", "--steps", "2", "--scheduler", "serial", "--out", str(out)]
+    assert main(argv) == 0
+    assert "recommended flap: c00-d" in capsys.readouterr().out
+    assert main(argv) == 0  # resumes
+    assert json.loads((out / "status.json").read_text())["status"] == "complete"
