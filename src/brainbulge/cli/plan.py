@@ -26,7 +26,7 @@ MAX_CENTRES = 100
 
 
 def add_parser(sub: Any) -> None:
-    from brainbulge.studies.plan import DIAMETERS_MM, N_CENTRES
+    from brainbulge.results.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
 
     p = sub.add_parser("plan", help="search the flap's centre and size for the least damage",
                        description=__doc__)
@@ -52,9 +52,10 @@ def add_parser(sub: Any) -> None:
     where.add_argument("--centre", type=float, nargs=3, action="append", default=None,
                        metavar=("X", "Y", "Z"),
                        help="a candidate centre on the skull [mm, RAS]; repeat for more")
-    p.add_argument("--threshold", type=positive_float("--threshold"), default=0.18,
+    p.add_argument("--threshold", type=positive_float("--threshold"),
+                   default=STRAIN_THRESHOLD,
                    help="principal strain above which tissue counts as strained (default "
-                   "0.18: Bain & Meaney 2000)")
+                   f"{STRAIN_THRESHOLD:g}: Bain & Meaney 2000)")
     p.add_argument("--steps", type=int, default=4, help="initial load steps of a cold start")
     p.add_argument("--tolerance", type=positive_float("--tolerance"), default=1e-9,
                    help="Newton's tolerance at full load (default 1e-9)")

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from brainbulge.results.fields import output_fields, sample
+from brainbulge.results.plan_defaults import RIM_BAND_MM, STRAIN_THRESHOLD
 from brainbulge.results.quadrature import quadrature_points
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.summary import CHUNK, weighted_percentiles
@@ -40,10 +41,6 @@ if TYPE_CHECKING:
     from brainbulge.geometry.brain import Flap, RigidSkull
     from brainbulge.solver.mixed import MixedForm
 
-#: maximum principal strain at which 50 % of axons were injured in vitro (Bain & Meaney 2000)
-STRAIN_THRESHOLD = 0.18
-#: distances from the flap rim between which the rim measures are taken [mm]
-RIM_BAND_MM = (5.0, 10.0)
 MM3_PER_ML = 1000.0
 
 

@@ -42,7 +42,8 @@ from brainbulge.geometry.brain import BrainMesh
 from brainbulge.geometry.brain.boundaries import SuperiorBand
 from brainbulge.geometry.brain.flap_fit import fit_flap, signed_lateral_mm
 from brainbulge.model.brain import CraniectomyCase, open_custom_flap
-from brainbulge.results.plan_measures import STRAIN_THRESHOLD, damage_measures
+from brainbulge.results.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
+from brainbulge.results.plan_measures import damage_measures
 from brainbulge.results.run_record import atomic_output
 from brainbulge.studies.craniectomy import (
     PARENCHYMA,
@@ -53,10 +54,6 @@ from brainbulge.studies.craniectomy import (
 
 log = logging.getLogger("brainbulge")
 
-#: flap diameters tried by default [mm]: the 12 cm guideline in the middle
-DIAMETERS_MM = (80.0, 100.0, 120.0, 140.0, 160.0)
-#: candidate centres by default (per plan; half on each side with ``swell = "both"``)
-N_CENTRES = 10
 PLAN_TASK = "brainbulge.studies.plan:plan_task"
 STATE_FILE = "state.npz"
 
