@@ -257,9 +257,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
-    from brainbulge.cli import brain, demo, hemidisk, mesh, reproduce, run, study
+    from brainbulge.cli import brain, demo, hemidisk, mesh, plan, reproduce, run, study
 
-    for module in (hemidisk, brain, study, demo, reproduce, run, mesh):
+    for module in (hemidisk, brain, study, plan, demo, reproduce, run, mesh):
         module.add_parser(sub)
     return parser
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain import BrainMesh, to_ngsolve
-from brainbulge.geometry.brain.boundaries import SuperiorBand
+from brainbulge.geometry.brain.boundaries import UNILATERAL_DIAMETER_MM, SuperiorBand
 from brainbulge.geometry.brain.defaults import (
     FIXATIONS,
     SUPERIOR_ELEVATION_DEG,
@@ -189,9 +189,11 @@ class CraniectomyCase:
             raise InputError(f"brain mesh {self.mesh} does not exist; build one with "
                              "`brainbulge mesh --out DIR` and pass DIR/brain.npz")
         if self.mesh is not None:
+            # a custom flap is a boundary condition: it opens on the given mesh
+            custom = self.flap == "custom"
             geometry = {"--labels": self.labels, "--brain-volume": self.brain_volume_ml,
-                        "--flap-centre": self.flap_centre_mm,
-                        "--flap-diameter": self.flap_diameter_mm,
+                        "--flap-centre": None if custom else self.flap_centre_mm,
+                        "--flap-diameter": None if custom else self.flap_diameter_mm,
                         "--label-map": None if self.label_map == "synthseg" else self.label_map}
             given = [k for k, v in geometry.items() if v is not None]
             if given:
@@ -252,6 +254,8 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
     if case.mesh is not None:
         path = Path(case.mesh)
         bm = load_brain_mesh(path / "brain.npz" if path.is_dir() else path)
+        if case.flap == "custom" and case.flap_centre_mm is not None:
+            open_custom_flap(bm, case)
     else:
         image = load_tissue_image(case.labels, case.label_map) if case.labels else None
         kwargs = {}
@@ -266,6 +270,17 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
                          f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
     return bm
+
+
+def open_custom_flap(bm: BrainMesh, case: CraniectomyCase) -> None:
+    """Open the case's custom flap (``flap_centre_mm``, ``flap_diameter_mm``, default 120
+    mm) on the loaded mesh ``bm`` as ``bm.flaps["custom"]``, by the fitting rule of
+    :mod:`brainbulge.geometry.brain.flap_fit` (refused if it reaches the fixed base or
+    crosses the midline, clipped at the fixed superior band); the mesh is not rebuilt."""
+    from brainbulge.geometry.brain.flap_fit import attach_flap, fit_flap
+
+    diameter = case.flap_diameter_mm or UNILATERAL_DIAMETER_MM
+    attach_flap(bm, fit_flap(bm, case.flap_centre_mm, diameter, case.superior_band()))
 
 
 def coarse_brain_mesh_for(case: CraniectomyCase, fine: BrainMesh | None = None

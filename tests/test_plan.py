@@ -1,0 +1,284 @@
+"""The craniectomy planner (``brainbulge plan``) on the toy head of docs/own-mri.md.
+
+A mirror-symmetric ellipsoid brain (no ventricle, mid-sagittal plane x = 0, ~1000 tets):
+
+- candidate centres are spread evenly over the convexity of the swelling side; for both
+  sides they are mirror images;
+- the fitting rule: a flap reaching the fixed base is refused, one reaching the superior band
+  is clipped there (the band stays fixed), one reaching far over the midline is refused;
+- the recommendation rule and the Pareto front on synthetic tables;
+- one plan end to end (one centre, two diameters): files and columns, the larger flap warm-
+  started from the smaller one gives the cold start's answer, a larger flap lowers the bulge
+  height, a rerun resumes;
+- (slow) for left swelling the best centre lies on the left; a flap mirrored across the
+  midline mirrors the midline shift and keeps the damage.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brainbulge.errors import InputError
+from brainbulge.geometry.brain.boundaries import SuperiorBand
+from brainbulge.geometry.brain.flap_fit import (
+    attach_flap,
+    convexity_centres,
+    convexity_faces,
+    fit_flap,
+    mirrored,
+    signed_lateral_mm,
+)
+from brainbulge.model.brain import CraniectomyCase
+from brainbulge.results.plan_report import COLUMNS, pareto_front, recommend
+from brainbulge.studies.plan import plan_cases, run_plan
+
+sys.path.insert(0, str(Path(__file__).parent))
+from toy_brain import toy_labels  # noqa: E402
+
+BAND = SuperiorBand()
+#: the toy head is 12 x 10 x 9 cm: flaps of 7-8 cm are its 12-14 cm
+SMALL, LARGE = 70.0, 80.0
+
+
+@pytest.fixture(scope="module")
+def toy(tmp_path_factory):
+    """The symmetric toy brain, saved as ``brain.npz``; (mesh path, BrainMesh)."""
+    from brainbulge.geometry.brain import build_brain_mesh, load_tissue_image, save_brain_mesh
+    from brainbulge.geometry.brain.regions import MidSagittalPlane
+
+    folder = tmp_path_factory.mktemp("toy")
+    image = load_tissue_image(toy_labels(folder / "seg.nii.gz", ventricles=False), "synthseg")
+    bm = build_brain_mesh(image, target_tets=1000, midsagittal=MidSagittalPlane())
+    save_brain_mesh(bm, folder, figures=False)
+    return str(folder / "brain.npz"), bm
+
+
+def _base(mesh: str, **kw) -> CraniectomyCase:
+    return CraniectomyCase(flap="none", swell=kw.pop("swell", "left"), steps=2, mesh=mesh, **kw)
+
+
+# --- candidates --------------------------------------------------------------------------
+def test_candidates_are_spread_evenly_over_the_swelling_side(toy) -> None:
+    _, bm = toy
+    centres = convexity_centres(bm, "left", 5, BAND)
+    assert np.all(signed_lateral_mm(bm, centres) < -BAND.width_mm / 2)
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    nearest = d.min(axis=1)
+    assert nearest.min() > 0.5 * nearest.max()  # no two crowd together
+    # every point of the convexity is nearer to a centre than the centres are to each other
+    faces = bm.nodes_mm[bm.faces].mean(axis=1)[convexity_faces(bm, "left", BAND)]
+    cover = np.linalg.norm(faces[:, None] - centres[None], axis=2).min(axis=1).max()
+    assert cover < nearest.max()
+    right = convexity_centres(bm, "right", 5, BAND)
+    assert np.all(signed_lateral_mm(bm, right) > BAND.width_mm / 2)
+
+
+def test_both_sides_get_mirror_images(toy) -> None:
+    _, bm = toy
+    centres = convexity_centres(bm, "both", 4, BAND)
+    left, right = centres[:2], centres[2:]
+    assert np.all(signed_lateral_mm(bm, left) < 0) and np.all(signed_lateral_mm(bm, right) > 0)
+    assert np.allclose(right, mirrored(bm, left))
+    with pytest.raises(InputError, match="even"):
+        convexity_centres(bm, "both", 3, BAND)
+
+
+# --- fitting rule ------------------------------------------------------------------------
+def test_a_flap_reaching_the_base_is_refused(toy) -> None:
+    _, bm = toy
+    low = bm.envelope.centre_mm() + np.array([-60.0, 0.0, -25.0])
+    fit = fit_flap(bm, low, 90.0, BAND)
+    assert not fit.fits and "fixed base" in fit.reason
+    with pytest.raises(InputError, match="does not fit"):
+        attach_flap(bm, fit)
+
+
+def test_a_flap_over_the_band_is_clipped_there_and_far_over_the_midline_refused(toy) -> None:
+    _, bm = toy
+    top = bm.envelope.centre_mm() + np.array([-30.0, 0.0, 60.0])
+    fit = fit_flap(bm, top, 60.0, BAND)
+    assert fit.fits and fit.clipped_cm2 > 0
+    assert not (fit.mask & bm.superior_faces(BAND)).any()
+    attach_flap(bm, fit)
+    names = bm.boundary_names("custom", BAND)
+    assert np.all(names[bm.superior_faces(BAND)] == "superior")  # the bone strip stays
+    wide = fit_flap(bm, top, 90.0, BAND)
+    assert not wide.fits and "midline" in wide.reason
+
+
+def test_a_lateral_flap_fits_whole(toy) -> None:
+    _, bm = toy
+    centre = convexity_centres(bm, "left", 1, BAND)[0]
+    fit = fit_flap(bm, centre, SMALL, BAND)
+    assert fit.fits and fit.clipped_cm2 == 0
+    disk = np.pi * (SMALL / 20) ** 2
+    assert disk < fit.area_cm2 < 1.5 * disk  # the cylinder on a curved skull: a bit more
+
+
+def test_refused_flaps_stay_in_the_plan_marked(toy) -> None:
+    mesh, bm = toy
+    low = bm.envelope.centre_mm() + np.array([-60.0, 0.0, -25.0])
+    cases = plan_cases(_base(mesh), bm, [low], [SMALL, 90.0])
+    assert [c.name for c in cases] == ["c00-d70", "c00-d90"]
+    assert "fixed base" in cases[1].extra["refused"]
+    with pytest.raises(InputError, match="fits"):
+        run_plan(cases[1:], Path(mesh).parent / "nothing", scheduler="serial")
+
+
+# --- recommendation ----------------------------------------------------------------------
+def _row(name, area, damage, converged=True):
+    return {"name": name, "flap_area_cm2": area, "strained_volume_ml": damage,
+            "converged": converged, "diameter_mm": area}
+
+
+def test_recommendation_is_the_smallest_flap_within_tolerance() -> None:
+    rows = [_row("a", 80, 20.0), _row("b", 110, 10.5), _row("c", 140, 10.0),
+            _row("d", 200, 10.2), _row("e", 60, 1.0, converged=False)]
+    best, least, bound = recommend(rows)
+    assert least == 10.0 and bound == pytest.approx(11.0)  # 10 % of the least
+    assert best["name"] == "b"
+    best, _, bound = recommend(rows, rel_tol=0.01)
+    assert bound == pytest.approx(10.5) and best["name"] == "b"  # the 0.5 ml floor
+    best, _, _ = recommend(rows, rel_tol=0.0, abs_tol=0.1)
+    assert best["name"] == "c"
+    assert recommend([_row("x", 1, 1, converged=False)])[0] is None
+
+
+def test_pareto_front() -> None:
+    area = np.array([80, 110, 140, 200, 120])
+    damage = np.array([20, 10.5, 10, 10.2, 15])
+    assert pareto_front(area, damage).tolist() == [True, True, True, False, False]
+
+
+# --- one plan end to end -----------------------------------------------------------------
+@pytest.fixture(scope="module")
+def plan(toy, tmp_path_factory):
+    """Left swelling, one lateral centre, two diameters (the larger warm-started)."""
+    mesh, bm = toy
+    out = tmp_path_factory.mktemp("plan")
+    centre = convexity_centres(bm, "left", 1, BAND)
+    cases = plan_cases(_base(mesh), bm, centre, [LARGE, SMALL])
+    rows = run_plan(cases, out, scheduler="serial", progress=False)
+    return out, cases, {r["name"]: r for r in rows}
+
+
+def test_plan_writes_its_table_figures_and_report(plan) -> None:
+    out, cases, rows = plan
+    assert [c.name for c in cases] == ["c00-d70", "c00-d80"]  # smallest first
+    for f in ("plan.csv", "pareto.png", "centres.png", "report.md", "study.json"):
+        assert (out / f).is_file(), f
+    for c in cases:
+        for f in ("summary.json", "fields.vtu", "sections.png", "state.npz"):
+            assert (out / c.name / f).is_file(), f
+    with open(out / "plan.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert tuple(table[0]) == COLUMNS
+    assert [r["converged"] for r in table] == ["True", "True"]
+    for r in table:
+        assert float(r["strained_volume_ml"]) >= 0 and float(r["flap_area_cm2"]) > 0
+        assert 0 < float(r["p99_principal_strain"]) < 1
+    report = (out / "report.md").read_text()
+    assert "**c00-d" in report and "134.8" in report and "12 cm" in report
+
+
+def test_the_larger_flap_starts_from_the_smaller_one_and_lowers_the_bulge(plan) -> None:
+    _, _, rows = plan
+    small, large = rows["c00-d70"], rows["c00-d80"]
+    assert small["warm_start_from"] is None
+    assert large["warm_start_from"] == "c00-d70" and large["warm_start_converged"]
+    assert large["max_displacement"] < small["max_displacement"]
+    # the strained volume does not grow beyond the estimate's resolution (one tet's share)
+    assert large["strained_volume_ml"] <= small["strained_volume_ml"] + 0.5
+    assert large["rim_volume_ml"] > 0 and large["rim_max_principal_strain"] is not None
+
+
+def test_a_warm_start_gives_the_cold_start_answer(plan, tmp_path) -> None:
+    out, cases, rows = plan
+    from brainbulge.studies.craniectomy import run_brain
+
+    cold = run_brain(cases[1], tmp_path, brain_mesh=_fresh_mesh(cases[1]))
+    warm = rows["c00-d80"]
+    for key in ("max_displacement", "midline_shift_mm", "bulge_volume_ml",
+                "p99_principal_strain"):
+        assert warm[key] == pytest.approx(cold[key], rel=2e-3, abs=1e-4), key
+
+
+def _fresh_mesh(case):
+    from brainbulge.model.brain import brain_mesh_for
+
+    return brain_mesh_for(case)  # loads the mesh and opens the case's flap by the same rule
+
+
+def test_a_rerun_resumes(plan) -> None:
+    out, cases, rows = plan
+    stamps = {c.name: (out / c.name / "summary.json").stat().st_mtime_ns for c in cases}
+    again = run_plan(cases, out, scheduler="serial", progress=False)
+    assert all(r["complete"] for r in again)
+    study = json.loads((out / "study.json").read_text())
+    assert all(e.get("resumed") for e in study["scenarios"])
+    assert stamps == {c.name: (out / c.name / "summary.json").stat().st_mtime_ns
+                      for c in cases}
+
+
+# --- physics across centres (slow) -------------------------------------------------------
+@pytest.mark.slow
+def test_left_swelling_is_best_relieved_on_the_left_and_a_mirrored_flap_mirrors(
+        toy, tmp_path) -> None:
+    mesh, bm = toy
+    centres = convexity_centres(bm, "both", 2, BAND)  # one left, its mirror image right
+    rows = run_plan(plan_cases(_base(mesh), bm, centres, [SMALL]), tmp_path / "left",
+                    scheduler="serial", progress=False)
+    left, right = rows
+    assert left["complete"] and right["complete"]
+    assert left["strained_volume_ml"] < right["strained_volume_ml"]
+    assert left["max_displacement"] > right["max_displacement"]  # the swollen side bulges
+    both = run_plan(plan_cases(_base(mesh, swell="both"), bm, centres, [SMALL]),
+                    tmp_path / "both", scheduler="serial", progress=False)
+    a, b = both
+    assert a["midline_shift_mm"] == pytest.approx(-b["midline_shift_mm"], rel=0.2, abs=0.05)
+    for key in ("strained_volume_ml", "max_displacement", "p99_principal_strain"):
+        assert a[key] == pytest.approx(b[key], rel=0.1, abs=0.3), key
+
+
+# --- the command -------------------------------------------------------------------------
+@pytest.mark.parametrize("argv, message", [
+    (["--swell", "left", "--diameters", "300"], "[40, 200] mm"),
+    (["--swell", "left", "--diameters", "100", "100"], "repeats"),
+    (["--swell", "both", "--centres", "3"], "even"),
+    (["--swell", "left", "--centres", "0"], "--centres"),
+    (["--swell", "left", "--centre", "500", "0", "0"], "--centre 500 0 0"),
+    (["--swell", "left", "--threshold", "2"], "--threshold"),
+    (["--swell", "left", "--mesh", "missing/brain.npz"], "does not exist"),
+    (["--swell", "left", "--label-map", "m.json"], "--labels"),
+    (["--swell", "left", "--scheduler", "not a url"], "scheduler"),
+])
+def test_bad_input_is_one_line_before_out_is_touched(argv, message, tmp_path, capsys) -> None:
+    from brainbulge.cli import main
+
+    out = tmp_path / "plan"
+    assert main(["plan", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_the_command_end_to_end(toy, tmp_path, capsys) -> None:
+    from brainbulge.cli import main
+
+    mesh, bm = toy
+    c = convexity_centres(bm, "left", 1, BAND)[0]
+    out = tmp_path / "plan"
+    argv = ["plan", "--swell", "left", "--mesh", mesh, "--centre", *map(str, c), "--diameters",
+            "70", "80", "--steps", "2", "--scheduler", "serial", "--out", str(out)]
+    assert main(argv) == 0
+    assert "recommended flap: c00-d" in capsys.readouterr().out
+    assert main(argv) == 0  # resumes
+    assert json.loads((out / "status.json").read_text())["status"] == "complete"
