@@ -12,14 +12,12 @@ one; its Gram-Schmidt is limited inside the Krylov loop).
 
 from __future__ import annotations
 
-from contextlib import AbstractContextManager, nullcontext
+from contextlib import AbstractContextManager
+
+from threadpoolctl import ThreadpoolController
 
 
 def serial_openblas() -> AbstractContextManager:
     """Context in which OpenBLAS (NumPy's and NGSolve's) runs on one thread; MKL (PARDISO)
     and NGSolve's task manager keep theirs."""
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # pragma: no cover - threadpoolctl is a declared dependency
-        return nullcontext()
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)

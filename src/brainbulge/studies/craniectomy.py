@@ -65,7 +65,7 @@ from brainbulge.results.run_record import atomic_output, atomic_write_json, atom
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
 from brainbulge.results.views3d import write_study_surfaces, write_surface_views
-from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.sequencing import solve_sequenced
 
 #: the parenchyma: where axons are and tissue extremes are taken
@@ -123,22 +123,23 @@ def run_brain(
         _check_same_domain(coarse_bm, bm)
         coarse = MixedForm(brain_problem(coarse_bm, case), element=case.element,
                            compile_energy=case.compile)
-        sol, solver, sequenced = solve_sequenced(coarse, form, options)
+        sol, sequenced = solve_sequenced(coarse, form, options)
         del coarse
     else:
         solver = NewtonSolver(form, options)
         sol = solver.solve()
-    solver.release_linear_solver()
+        solver.release_linear_solver()
+        del solver
     if sol.converged:
         restart.unlink(missing_ok=True)
     fibres = _fibres(case, bm)
-    summary = brain_summary(case, bm, form, solver, sol, fibres)
+    summary = brain_summary(case, bm, sol, fibres)
     summary["mesh_sequencing"] = None if sequenced is None else dataclasses.asdict(sequenced)
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
-    state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
+    state = "" if sol.converged else f" (stopped at Js = {sol.swelling_reached:.3f})"
     section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
     write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
     atomic_write_json(out_dir / "summary.json", summary)
@@ -170,12 +171,11 @@ def _check_same_domain(coarse: BrainMesh, fine: BrainMesh) -> None:
 def brain_summary(
     case: CraniectomyCase,
     bm: BrainMesh,
-    form: MixedForm,
-    solver: NewtonSolver,
-    sol,
+    sol: Solution,
     fibres=None,
 ) -> dict[str, Any]:
     """``summary.json`` of a 3D scenario (see the module docstring)."""
+    form = sol.form
     skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
     flap = bm.flaps[case.flap]
     band = case.edge_exclusion_mm
@@ -193,7 +193,7 @@ def brain_summary(
         "case": case.name,
         "inputs": dataclasses.asdict(case),
         **solution_summary(
-            sol, solver, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
+            sol, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
             tissue=PARENCHYMA, fibres=fibres,
         ),
     }
@@ -202,7 +202,7 @@ def brain_summary(
     out["edge_exclusion_mm"] = band
     out.pop("edge_exclusion", None)
     out.pop("singular_points", None)
-    out["swelling_reached"] = 1 + sol.load * (case.swelling - 1)
+    out["swelling_reached"] = sol.swelling_reached
     # vertex displacements
     u = _vertex_displacements(form, bm)
     out.update(brain_outputs(bm, form, u, PARENCHYMA, SWELL_SIDES[case.swell]))
