@@ -14,10 +14,11 @@ from __future__ import annotations
 
 from contextlib import AbstractContextManager
 
-from threadpoolctl import ThreadpoolController
-
 
 def serial_openblas() -> AbstractContextManager:
     """Context in which OpenBLAS (NumPy's and NGSolve's) runs on one thread; MKL (PARDISO)
-    and NGSolve's task manager keep theirs."""
+    and NGSolve's task manager keep theirs. (threadpoolctl is imported here, not at the
+    package's import: importing it sets ``KMP_DUPLICATE_LIB_OK``.)"""
+    from threadpoolctl import ThreadpoolController
+
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
