@@ -92,7 +92,7 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     assert sol.converged
 
     def run() -> dict:
-        return summary.solution_summary(sol, solver, np.zeros(2), geo.singular_points(), 0.05)
+        return summary.solution_summary(sol, np.zeros(2), geo.singular_points(), 0.05)
 
     whole = run()
     monkeypatch.setattr(summary, "CHUNK", 97)  # uneven: the last chunk is short
@@ -119,7 +119,7 @@ def test_argmax_locations_carry_their_maxima_outside_the_exclusion_disks() -> No
     solver = NewtonSolver(form, SolverOptions(steps=2))
     sol = solver.solve()
     assert sol.converged
-    s = solution_summary(sol, solver, np.zeros(2), corners, case.edge_exclusion)
+    s = solution_summary(sol, np.zeros(2), corners, case.edge_exclusion)
     G = recovered_gradient(form.mesh, form.output_displacement())  # as the summary's
     for stem, field in (("radial_stretch", "lambda_n"), ("tangential_stretch", "lambda_t"),
                         ("principal_strain", "max_principal_strain")):

@@ -108,7 +108,7 @@ def test_extremes_converge_with_rim_refinement() -> None:
         sol = solver.solve()
         assert sol.converged
         geo = case.geometry
-        return solution_summary(sol, solver, np.zeros(2), geo.singular_points(),
+        return solution_summary(sol, np.zeros(2), geo.singular_points(),
                                 case.edge_exclusion)
 
     fine = summary(corner_mesh_size=0.005, rim_mesh_size=0.0025)
@@ -155,26 +155,17 @@ def test_skull_normal_is_the_gap_gradient() -> None:
     np.testing.assert_allclose(np.linalg.norm(n[outside], axis=1), 1.0, atol=1e-12)
 
 
-def test_active_set_and_augmented_lagrangian_agree() -> None:
-    """The two sliding-contact methods solve the same problem: exact multipliers at the
-    nodes (default) and the augmented Lagrangian at integration points agree on the
-    displacement within 1%, and the active set needs far fewer Newton iterations."""
-    results = {}
-    for method in ("active-set", "augmented"):
-        case = HemidiskCase(alpha=60, beta=90, mesh_size=0.1, contact_method=method,
-                            skull="rigid")
-        problem = hemidisk_problem(case)
-        form = MixedForm(problem)
-        solver = NewtonSolver(form, SolverOptions(steps=4))
-        sol = solver.solve()
-        assert sol.converged
-        X = np.array([[0.0, 0.999], [0.5, 0.5], [-0.3, 0.9]])
-        u = np.array([form.u(form.mesh(*p)) for p in X])
-        results[method] = (u, sol.newton_iterations, solver.max_penetration())
-    (u_a, it_a, pen_a), (u_l, it_l, pen_l) = results["active-set"], results["augmented"]
-    np.testing.assert_allclose(u_a, u_l, atol=0.01 * np.abs(u_l).max())
-    assert pen_a < 1e-10 and pen_l < 1e-4
-    assert it_a < it_l
+def test_old_run_files_contact_method_loads_and_augmented_is_refused() -> None:
+    """Contact is solved by the active set only: a run file's ``contact_method =
+    "active-set"`` (written by older versions) still loads, ``"augmented"`` is refused with
+    a one-line message."""
+    from brainbulge.errors import InputError
+    from brainbulge.studies.hemidisk import case_from_dict
+
+    case = case_from_dict({"alpha": 60, "beta": 90, "contact_method": "active-set"})
+    assert case.alpha == 60
+    with pytest.raises(InputError, match="no longer available"):
+        case_from_dict({"alpha": 60, "contact_method": "augmented"})
 
 
 def test_noslip_boundary_does_not_move(noslip) -> None:
@@ -250,7 +241,7 @@ def test_larger_opening_lowers_max_radial_stretch() -> None:
         assert sol.converged
         from brainbulge.results.summary import solution_summary
 
-        s = solution_summary(sol, solver, np.zeros(2), case.geometry.singular_points(), 0.05)
+        s = solution_summary(sol, np.zeros(2), case.geometry.singular_points(), 0.05)
         maxima.append(s["max_radial_stretch"])
     assert maxima[1] < maxima[0]
 

@@ -302,7 +302,7 @@ def test_extra_constraint_rows_of_an_active_set(swollen) -> None:
 def test_forcing_terms_follow_the_residual_ratio() -> None:
     """Eisenstat-Walker choice 2: tight when Newton converges fast, capped, safeguarded,
     and never tighter than the Newton tolerance needs."""
-    from brainbulge.solver.newton import ETA_MAX, ETA_MIN, forcing_term
+    from brainbulge.solver.inexact import ETA_MAX, ETA_MIN, forcing_term
 
     assert forcing_term(ETA_MAX, 0.9, 1.0, 1e-9) == ETA_MAX  # slow progress: loose
     assert forcing_term(ETA_MAX, 1e-3, 1e-3, 1e-12) == pytest.approx(0.9e-6)
@@ -441,7 +441,7 @@ def test_direct_solver_analyses_a_sparsity_pattern_once(swollen, monkeypatch) ->
 def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:
     """``K + r B^T B`` with ``b - r B^T c`` (what both linear solvers get) solves the plain
     saddle point ``[[K, -B^T], [-B, 0]] [dx, dlam] = [b, c]`` exactly."""
-    from brainbulge.solver.newton import _augmented
+    from brainbulge.solver.contact.saddle import augmented
 
     form, ns, K, r = swollen
     rng = np.random.default_rng(3)
@@ -451,7 +451,7 @@ def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:
     c = rng.normal(size=12)
     plain = sp.bmat([[K, -B.T], [-B, None]], format="csr")
     ref = sp.linalg.spsolve(plain.tocsc(), np.concatenate([r, c]))
-    Ka, ba = _augmented(K, r, B, c, ns.is_u_free)
+    Ka, ba = augmented(K, r, B, c, ns.is_u_free)
     aug = sp.bmat([[Ka, -B.T], [-B, None]], format="csr")
     x = sp.linalg.spsolve(aug.tocsc(), np.concatenate([ba, c]))
     np.testing.assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
@@ -482,7 +482,7 @@ def test_nodal_elimination_solves_the_active_set_saddle_point(swollen) -> None:
     """Eliminating nodal normal constraints (projected system, same size, no multiplier
     rows) gives the plain saddle point's displacements, pressures and multipliers, with the
     direct solver and with GMRES + AMG on the projected matrix."""
-    from brainbulge.solver.newton import NodalElimination
+    from brainbulge.solver.contact.saddle import NodalElimination
 
     form, ns, K, r = swollen
     B, c = _nodal_constraints(form, ns, K, m=15)
@@ -509,7 +509,7 @@ def test_a_guess_from_a_smaller_active_set_is_projected(swollen) -> None:
     is, where its normal parts at the new points meet the d N N^T rows (on the 1.54M-tet
     brain unprojected guesses were worse than zero: the retries took 51 GMRES iterations
     as the first solve; projected, 24 and 9 on the 111k-tet brain)."""
-    from brainbulge.solver.newton import NodalElimination
+    from brainbulge.solver.contact.saddle import NodalElimination
 
     form, ns, K, r = swollen
     B, c = _nodal_constraints(form, ns, K, m=15)
@@ -529,9 +529,10 @@ def test_a_failed_line_search_on_a_loose_krylov_direction_retries_tighter(monkey
     """With a Krylov tolerance far too loose (0.5), a direction can be so poor that the line
     search finds no step; the solver then solves it again 100x tighter instead of giving up
     (without the retry this load step fails twice and is cut: 3 Newton solves, 18 its)."""
-    import brainbulge.solver.newton as newton
+    from brainbulge.solver import inexact, newton
 
-    monkeypatch.setattr(newton, "ETA_MAX", 0.5)
+    for module in (newton, inexact):  # the loosest tolerance: at each solve, and the cap
+        monkeypatch.setattr(module, "ETA_MAX", 0.5)
     form = MixedForm(_inclusion_problem(), element="mini")
     ns = NewtonSolver(form, SolverOptions(steps=1, linear_solver="krylov"))
     sol = ns.solve()
@@ -554,3 +555,15 @@ def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None
     sol = solver.solve()
     assert sol.converged
     assert solver.linear.lu_solves == 0
+
+
+def test_both_linear_solvers_offer_what_newton_calls() -> None:
+    """PARDISO and the Krylov solver both implement :class:`LinearSolver`: the solve with a
+    tolerance and a guess, the new-load-step hook, release and iteration counts."""
+    from brainbulge.solver.linear import LinearSolver, make_linear_solver
+
+    form = MixedForm(_inclusion_problem(), element="mini")
+    for name in ("pardiso", "krylov"):
+        linear = make_linear_solver(name, form)
+        assert isinstance(linear, LinearSolver)
+        assert isinstance(linear.stats.iterations, list)

@@ -104,9 +104,10 @@ def test_newton_takes_the_same_path_with_either_tangent() -> None:
     results = []
     for closed in (True, False):
         form = MixedForm(_problem(), element="mini")
-        ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10,
-                                              closed_form_tangent=closed))
-        assert (ns.closed is not None) == closed
+        ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10))
+        assert ns.closed is not None
+        if not closed:
+            ns.closed = None  # the plain path: NGSolve's AssembleLinearization
         res = ns.solve()
         assert res.converged
         results.append((res.newton_iterations, form.gfu.vec.FV().NumPy().copy()))
@@ -120,12 +121,6 @@ def test_other_forms_keep_ngsolves_tangent() -> None:
     assert not applies(MixedForm(_problem(), element="taylor-hood"))
     assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).closed is None
 
-
-def test_the_environment_can_switch_it_off(monkeypatch) -> None:
-    monkeypatch.setenv("BRAINBULGE_CLOSED_TANGENT", "0")
-    assert not SolverOptions().closed_form_tangent
-    monkeypatch.delenv("BRAINBULGE_CLOSED_TANGENT")
-    assert SolverOptions().closed_form_tangent
 
 
 def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(monkeypatch, caplog) -> None:

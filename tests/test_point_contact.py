@@ -150,9 +150,11 @@ def test_capped_sphere_radial_map(capped_sphere) -> None:
 
 
 def test_capped_sphere_contact(capped_sphere) -> None:
-    _, form, solver, _ = capped_sphere
+    _, form, solver, sol = capped_sphere
     pc = form.point_contacts[0]
     assert solver.max_penetration() < 1e-5  # of the radius 1
+    assert sol.max_penetration == solver.max_penetration()  # the solution carries it
+    assert sol.swelling_reached == pytest.approx(JS, rel=1e-15)  # the inclusion's target
     p = pc.pressure()
     on = p > 0.1 * p.max()
     assert on.sum() > 10

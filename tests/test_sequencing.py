@@ -18,8 +18,10 @@ from scipy.spatial import cKDTree
 
 from brainbulge.errors import InputError
 from brainbulge.solver import SolverOptions
+from brainbulge.solver import ramp as solver_ramp
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver, Solution
+from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver.options import DIVERGENCE_ADVICE, Solution
 from brainbulge.solver.sequencing import interpolate_state, solve_sequenced
 from test_point_contact import A, _capped_ball
 
@@ -123,28 +125,28 @@ def test_contact_pressures_and_pressed_points() -> None:
 def test_sequenced_solve_reaches_the_fine_solution_in_fewer_iterations(ramp) -> None:
     fine_ref, sol_ref = ramp
     coarse, fine = _forms()
-    sol, solver, record = solve_sequenced(coarse, fine, OPTIONS)
+    sol, record = solve_sequenced(coarse, fine, OPTIONS)
     assert sol.converged and record.coarse_converged and record.fine_converged
     assert [s.load for s in sol.steps] == [1.0]
     assert sol.newton_iterations < sol_ref.newton_iterations
     # the carried-over state's residual: the fine Newton's first, above the tolerance
-    assert record.initial_residual == solver.history[-1][0] > OPTIONS.tolerance
+    assert record.initial_residual > OPTIONS.tolerance
     u_ref = _vertex_u(fine_ref)
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
     lam_ref = fine_ref.point_contacts[0].lam
     assert np.abs(fine.point_contacts[0].lam - lam_ref).max() < 1e-4 * lam_ref.max()
-    assert solver.max_penetration() < 1e-5
+    assert sol.max_penetration < 1e-5
 
 
 def test_sequencing_falls_back_to_the_ramp(ramp, monkeypatch) -> None:
     fine_ref, _ = ramp
 
     def fails(self: NewtonSolver) -> Solution:
-        return Solution(form=self.form, load=1.0, converged=False, message="forced")
+        return Solution(form=self.form, load=1.0, converged=False, note="forced")
 
     monkeypatch.setattr(NewtonSolver, "equilibrate", fails)
     coarse, fine = _forms()
-    sol, _, record = solve_sequenced(coarse, fine, OPTIONS)
+    sol, record = solve_sequenced(coarse, fine, OPTIONS)
     assert record.coarse_converged and not record.fine_converged
     assert sol.converged and len(sol.steps) >= 2  # the ramp
     u_ref = _vertex_u(fine_ref)
@@ -193,9 +195,10 @@ def test_tangent_with_contact_curvature_matches_the_plain_scipy_construction() -
         assert abs(K - ref).max() <= 1e-12 * abs(ref).max()
 
 
-def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp) -> None:
+def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp,
+                                                                           monkeypatch) -> None:
     """From a carried-over state the tangent leaves the contact curvature out while the
-    scaled residual is above ``carried_curvature_tolerance`` (a modified Newton method) and
+    scaled residual is above ``CARRIED_CURVATURE_TOLERANCE`` (a modified Newton method) and
     takes the exact tangent below it; the state reached is the fine ramp's."""
     fine_ref, _ = ramp
     coarse, fine = _forms()
@@ -203,7 +206,8 @@ def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp)
     interpolate_state(coarse, fine)
     probe = NewtonSolver(fine, OPTIONS)
     tol = 0.1 * probe.scaled_norm(probe.residual(fine.gfu.vec))
-    solver = NewtonSolver(fine, SolverOptions(steps=2, carried_curvature_tolerance=tol))
+    monkeypatch.setattr(solver_ramp, "CARRIED_CURVATURE_TOLERANCE", tol)
+    solver = NewtonSolver(fine, SolverOptions(steps=2))
     calls: list[tuple[float, bool]] = []
     tangent = solver.tangent
 
@@ -219,10 +223,6 @@ def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp)
     u_ref = _vertex_u(fine_ref)
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
 
-
-def test_carried_curvature_tolerance_must_be_positive() -> None:
-    with pytest.raises(InputError, match="carried_curvature_tolerance"):
-        SolverOptions(carried_curvature_tolerance=0.0)
 
 
 def test_vertex_fields_give_the_vertex_values():
@@ -262,7 +262,7 @@ def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
 
     monkeypatch.setattr(sequencing, "NewtonSolver", Recording)
     coarse, fine = _forms()
-    sol, _, _ = solve_sequenced(coarse, fine, OPTIONS)
+    sol, _ = solve_sequenced(coarse, fine, OPTIONS)
     assert sol.converged
     (tol_c, hist_c), (tol_f, hist_f) = histories
     assert tol_c == sequencing.COARSE_TOLERANCE > tol_f == OPTIONS.tolerance
@@ -288,17 +288,24 @@ def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
     dofs = list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
     x = coarse.gfu.vec
     x.FV().NumPy()[dofs] += 0.02 * coarse.h
-    site = solver.residual_site(x)
+    site = solver_ramp.residual_site(solver, x)
     np.testing.assert_allclose(site, X[v] + x.FV().NumPy()[dofs], atol=1e-12)
 
 
 def test_a_diverged_ramp_says_where_the_force_was_unbalanced() -> None:
     """Newton limited to one iteration per attempt cannot take a load step: the message
-    and the Solution name the deformed position of the largest unbalanced force."""
+    and the Solution's failure name the load, the smallest step tried and the deformed
+    position of the largest unbalanced force; a caller may give its own advice."""
     coarse, _ = _forms()
     sol = NewtonSolver(coarse, SolverOptions(steps=1, max_iterations=1, min_step=0.3)).solve()
-    assert not sol.converged
-    assert sol.failure_site is not None and np.all(np.isfinite(sol.failure_site))
+    assert not sol.converged and sol.load == 0.0 and sol.swelling_reached == 1.0
+    failure = sol.failure
+    assert failure is not None and failure.kept == 0.0
+    assert failure.step == pytest.approx(0.5) and failure.load == pytest.approx(0.5)
+    assert sol.failure_site is failure.site and np.all(np.isfinite(failure.site))
     assert "largest unbalanced force was at (" in sol.message
     where = ", ".join(f"{c:.4g}" for c in sol.failure_site)
     assert where in sol.message
+    assert sol.message.endswith(DIVERGENCE_ADVICE)
+    assert sol.describe("Look there.").endswith("is kept; the last attempt's largest "
+                                                f"unbalanced force was at ({where}). Look there.")

@@ -103,7 +103,7 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
     """Stopped with the largest unbalanced force on a rounded cut edge, the message says so
     instead of suggesting more steps or a finer mesh; elsewhere the solver's advice stays."""
     from brainbulge.model.hemidisk import HemidiskCase
-    from brainbulge.solver.newton import DIVERGENCE_ADVICE
+    from brainbulge.solver.options import DIVERGENCE_ADVICE, Failure, Solution
 
     case = HemidiskCase(alpha=80, beta=30, contact="sliding", skull="rigid")
     skull = case.obstacle
@@ -115,9 +115,13 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
     on_edge = centres[1] + 0.05 * np.array([1.0, 0.0])  # on the left rounding
     np.testing.assert_allclose(skull.gap_numpy(on_edge[None]), [0.0], atol=1e-12)
     assert skull.near_cut_edge(on_edge) and not skull.near_cut_edge(np.array([0.0, 0.5]))
-    message = f"Newton diverged at load 0.6 ...; the last state is kept. {DIVERGENCE_ADVICE}"
-    text = hd.stopped_message(case, message, list(on_edge))
+    def stopped(site) -> Solution:
+        return Solution(None, 0.5, False, failure=Failure(0.6, 0.1, 0.5, site))
+
+    text = hd.stopped_message(case, stopped(on_edge))
     assert DIVERGENCE_ADVICE not in text and "rounded cut edge" in text
     assert text.startswith("Newton diverged at load 0.6")
-    assert hd.stopped_message(case, message, [0.0, 0.5]) == message
-    assert hd.stopped_message(case, message, None) == message
+    for elsewhere in (np.array([0.0, 0.5]), None):
+        sol = stopped(elsewhere)
+        assert hd.stopped_message(case, sol) == sol.message
+        assert sol.message.endswith(DIVERGENCE_ADVICE)

@@ -42,13 +42,6 @@ def add_parser(sub: Any) -> None:
         "traction-free (default); rigid: a rigid shell of finite thickness with rounded cut "
         "edges, also in contact with the opening (an extension, docs/model.md)",
     )
-    p.add_argument(
-        "--contact-method",
-        choices=("active-set", "augmented"),
-        default="active-set",
-        help="sliding contact by exact nodal multipliers (primal-dual active set) or by an "
-        "augmented Lagrangian at integration points (slower; for comparison)",
-    )
     p.add_argument("--radius", type=float, default=1.0, help="hemidisk radius R [length]")
     p.add_argument("--mesh-size", type=float, default=0.05, help="element size [units of R]")
     p.add_argument(
@@ -102,7 +95,6 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "swelling": swelling,
         "contact": args.contact,
         "skull": args.skull,
-        "contact_method": args.contact_method,
         "R": args.radius,
         "mesh_size": args.mesh_size,
         "corner_mesh_size": args.corner_mesh_size,

@@ -153,7 +153,7 @@ class RigidSkull2D:
 
         ``grad g`` is the unit vector from the nearest point of the core to ``x`` (pointing
         out of the skull), zero inside the core; with it the skull also serves the exact
-        active-set contact (:mod:`brainbulge.solver.point_contact`).
+        active-set contact (:mod:`brainbulge.solver.contact.points`).
         """
         R1, R2, half, rho = self._core
         th = math.radians(self.center_deg)

@@ -23,8 +23,8 @@ edges rounded by ``skull_edge_radius`` (:class:`RigidSkull2D`), the rounding in 
   around the rounding is squeezed in a layer one element thick and the ramp stops
   (docs/known-limits.md).
 
-``contact_method`` ``active-set`` (default): exact contact pressures at the boundary nodes by
-a primal-dual active set; ``augmented``: an augmented Lagrangian at integration points.
+Contact is frictionless, with exact contact pressures at the boundary nodes by a primal-dual
+active set.
 """
 
 from __future__ import annotations
@@ -62,7 +62,6 @@ class HemidiskCase:
     swelling: float = 1.2
     contact: str = "sliding"
     skull: str = "paper"
-    contact_method: str = "active-set"
     R: float = 1.0
     mesh_size: float = 0.05
     corner_mesh_size: float | None = None
@@ -84,9 +83,6 @@ class HemidiskCase:
         if self.skull not in SKULLS:
             raise InputError(f"skull {self.skull!r} unknown; choose 'paper' (the paper's arc) "
                              "or 'rigid' (a rigid shell with rounded cut edges)")
-        if self.contact_method not in ("active-set", "augmented"):
-            raise InputError(f"contact method {self.contact_method!r} unknown; choose "
-                             "'active-set' or 'augmented'")
         import math
 
         if not isinstance(self.swelling, (int, float)) or not math.isfinite(self.swelling):
@@ -181,10 +177,10 @@ def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Proble
     if case.contact == "noslip":
         opening = []  # the paper's opening is traction-free and meets no obstacle
         if case.skull == "rigid" and case.beta > 0:
-            opening = [Contact("opening", skull, case.contact_method)]
+            opening = [Contact("opening", skull)]
         return Problem(mesh, materials, swelling, clamped="base|skull", contacts=opening)
     sliding = "skull" if case.skull == "paper" else "skull|opening"
     return Problem(
         mesh, materials, swelling, clamped="base",
-        contacts=[Contact(sliding, skull, case.contact_method)],
+        contacts=[Contact(sliding, skull)],
     )

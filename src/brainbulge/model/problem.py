@@ -15,50 +15,36 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 import ngsolve as ngs
+import numpy as np
 
 from brainbulge.errors import InputError
 from brainbulge.materials.base import Material
 
 
 class Obstacle(Protocol):
-    """A rigid body described by its signed distance ``g(x)`` [length].
+    """A rigid body described by its signed distance ``g(x)`` [length] on point arrays.
 
     ``g > 0`` outside the rigid body (admissible), ``g < 0`` inside it (penetration).
     """
 
-    def gap(self, x: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
-        """Signed distance at the (deformed) position ``x``, differentiable in ``x``."""
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``g`` (n,) at the (deformed) points ``x`` (n, dim) and ``grad g`` (n, dim)."""
         ...
 
 
 @dataclass
 class Contact:
-    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``.
-
-    ``method``: ``"active-set"``, exact multipliers at the boundary nodes by a primal-dual
-    active set (needs ``obstacle.gap_and_normal`` on point arrays); ``"augmented"``, an
-    augmented Lagrangian on the symbolic gap ``obstacle.gap``; ``"auto"``, the active set
-    when the obstacle offers point arrays, else the augmented Lagrangian.
-    """
+    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``, solved with
+    exact multipliers at the boundary nodes by a primal-dual active set."""
 
     boundary: str
     obstacle: Obstacle
-    method: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.method not in CONTACT_METHODS:
-            raise InputError(f"unknown contact method {self.method!r}; choose one of "
-                             f"{', '.join(CONTACT_METHODS)}")
+        if not hasattr(self.obstacle, "gap_and_normal"):
+            raise InputError(f"the obstacle of contact boundary {self.boundary!r} has no "
+                             "gap_and_normal(x) on point arrays; give it one")
 
-    @property
-    def active_set(self) -> bool:
-        """Whether this contact is solved with exact multipliers at the nodes."""
-        if self.method == "auto":
-            return hasattr(self.obstacle, "gap_and_normal")
-        return self.method == "active-set"
-
-
-CONTACT_METHODS = ("auto", "active-set", "augmented")
 
 
 @dataclass

@@ -30,7 +30,7 @@ import numpy as np
 from brainbulge.results.fields import output_fields, sample
 from brainbulge.results.quadrature import quadrature_points
 from brainbulge.results.recovery import recovered_gradient
-from brainbulge.solver.newton import NewtonSolver, Solution
+from brainbulge.solver.options import Solution
 
 #: summary key stem -> (field name, extreme kinds)
 EXTREMES = {
@@ -197,7 +197,6 @@ def _sampled_scalars(form, points, centre: np.ndarray,
 
 def solution_summary(
     sol: Solution,
-    solver: NewtonSolver,
     centre: np.ndarray,
     singular_points: list[tuple[float, ...]],
     edge_exclusion: float,
@@ -261,7 +260,7 @@ def solution_summary(
     out["swelling_volume"] = float(np.sum((Js - 1) * q.weights))
     out["max_pressure"] = float(fields["pressure"].max())
     out["min_pressure"] = float(fields["pressure"].min())
-    out["max_penetration"] = solver.max_penetration() if form.contacts_present else 0.0
+    out["max_penetration"] = sol.max_penetration
     if form.contacts_present:
         qb = quadrature_points(form.mesh, order=4, boundary=True)
         out["max_contact_pressure"] = float(np.max(qb(form.contact_pressure())))
@@ -269,6 +268,6 @@ def solution_summary(
     out["singular_points"] = [[float(c) for c in p[:dim]] for p in singular_points]
     if sol.message:
         out["message"] = sol.message
-    if not sol.converged and getattr(sol, "failure_site", None) is not None:
+    if not sol.converged and sol.failure_site is not None:
         out["failure_site"] = [float(c) for c in sol.failure_site]
     return out

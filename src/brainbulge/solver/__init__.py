@@ -1,6 +1,12 @@
-"""Mixed u-p formulation, Newton with load stepping, linear solvers."""
+"""The solve, as a pipeline: the mixed u-p form (:mod:`.mixed`), the load ramp (:mod:`.ramp`,
+with its restart file :mod:`.restart`), Newton with a line search (:mod:`.newton`) on the
+discrete equations (:mod:`.equations`), the skull contact's active set (:mod:`.contact`),
+the linear solvers (:mod:`.linear`, :mod:`.krylov`); options and results in
+:mod:`.options`."""
 
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions, solve
+from brainbulge.solver.newton import NewtonSolver, solve
+from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
 
-__all__ = ["MixedForm", "NewtonSolver", "Solution", "SolverOptions", "solve"]
+__all__ = ["Failure", "MixedForm", "NewtonSolver", "Solution", "SolverOptions", "StepRecord",
+           "solve"]

@@ -149,8 +149,8 @@ class HotspotRelaxation:
         # multiplier as an unknown; a point releasing its pressure holds its vertex fixed
         held = np.zeros(incidence.shape[1], dtype=bool)
         active = []
-        for pc, pv, forced in zip(pcs, point_vertex, s._forced, strict=True):
-            act = (pc.active(s.c_active) | forced) & (pv >= 0)
+        for pc, pv, forced in zip(pcs, point_vertex, s.contact.forced, strict=True):
+            act = (pc.active(s.contact.c_active) | forced) & (pv >= 0)
             active.append(act)
             held[pv[(pc.lam != 0) & ~act & (pv >= 0)]] = True
         patch = np.zeros(incidence.shape[1], dtype=bool)
@@ -170,11 +170,11 @@ class HotspotRelaxation:
         X = x.FV().NumPy()
         x_saved = X.copy()
         lam_saved = [pc.lam.copy() for pc in pcs]
-        res_saved, compl_saved = s.res.FV().NumPy().copy(), s._compl
+        res_saved, compl_saved = s.res.FV().NumPy().copy(), s.contact.complementarity
         its = problem.solve(X, target=0.01 * norm, max_iterations=self.max_iterations)
         new = s.scaled_norm(s.residual(x))
         penetrating = any(  # a free point of the patch that came to press on the skull
-            (pc.active(s.c_active) & ~act & patch[np.maximum(pv, 0)] & (pv >= 0)).any()
+            (pc.active(s.contact.c_active) & ~act & patch[np.maximum(pv, 0)] & (pv >= 0)).any()
             for pc, pv, act in zip(pcs, point_vertex, active, strict=True))
         kept = bool(new < norm and not penetrating)
         self.records.append(RelaxationRecord(len(hot), int(patch.sum()), its, norm, new, kept))
@@ -189,7 +189,7 @@ class HotspotRelaxation:
             pc.lam = lam
             pc.update(X)
         s.res.FV().NumPy()[:] = res_saved
-        s._compl = compl_saved
+        s.contact.complementarity = compl_saved
         return norm
 
 
@@ -200,7 +200,7 @@ class _LocalProblem:
         r_x = R(x) - P^T [A_i lambda_i n_i],   r_lambda = -A_i g_i,
         [[K - P^T (A lambda grad^2 g) P, -P^T N], [-N^T P, 0]]   (N_i = A_i n_i)
 
-    as :mod:`brainbulge.solver.point_contact` writes them for the whole body."""
+    as :mod:`brainbulge.solver.contact.points` writes them for the whole body."""
 
     def __init__(self, solver, elements: np.ndarray, regions: np.ndarray, patch: np.ndarray,
                  dof_vertex: np.ndarray, free_full: np.ndarray,

@@ -583,6 +583,11 @@ class BlockKrylovSolver:
         """Rebuild ``S~`` (and its finest AMG level) at the next solve: a new load step."""
         self._schur_stale = True
 
+    def new_load_step(self) -> None:
+        """:class:`brainbulge.solver.linear.LinearSolver`'s hook: a new load step renews
+        ``S~`` (:meth:`renew_schur`)."""
+        self.renew_schur()
+
     def release(self) -> None:
         """Free the AMG hierarchies and the sparse plans (a later solve makes them again)."""
         self._amg_u.release()

@@ -1,27 +1,58 @@
-"""Linear solves behind one small interface.
+"""Linear solves behind one small interface, :class:`LinearSolver`.
 
 NGSolve assembles; its own sparse direct solvers were measured 2-3x slower than MKL PARDISO
-on the hemidisk, so the tangent is exported to SciPy CSR and factorised by ``pypardiso``. An
-iterative block-preconditioned solver can be added behind the same interface.
+on the hemidisk, so the tangent is exported to SciPy CSR and factorised by ``pypardiso``
+(:class:`PardisoSolver`). The iterative alternative is block-preconditioned GMRES
+(:class:`brainbulge.solver.krylov.BlockKrylovSolver`).
 """
 
 from __future__ import annotations
 
 import logging
-from typing import Protocol
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.errors import ConvergenceError
+from brainbulge.errors import ConvergenceError, InputError
 
 log = logging.getLogger(__name__)
 
 
-class LinearSolver(Protocol):
-    """Solves ``K x = r`` for one tangent ``K`` (a fresh one each Newton iteration)."""
+class SolveStats(Protocol):
+    """What a linear solver counts: its iterations per solve (none for a direct solve)."""
 
-    def solve(self, K: sp.csr_matrix, r: np.ndarray) -> np.ndarray: ...
+    iterations: list[int]
+
+
+@runtime_checkable
+class LinearSolver(Protocol):
+    """What Newton asks of a linear solver (:class:`NewtonSolver`)."""
+
+    stats: SolveStats
+
+    def solve(self, K: sp.csr_matrix, r: np.ndarray, rtol: float | None = None,
+              x0: np.ndarray | None = None) -> np.ndarray:
+        """``x`` with ``K x = r`` for one tangent ``K`` (a fresh one each Newton iteration):
+        to the relative residual ``rtol`` (an iterative solver; None: its default) from the
+        guess ``x0``; ConvergenceError when it cannot."""
+        ...
+
+    def new_load_step(self) -> None:
+        """A Newton solve at a new load starts (a preconditioner may renew a part)."""
+        ...
+
+    def release(self) -> None:
+        """Free the work memory; a later solve rebuilds it."""
+        ...
+
+
+@dataclass
+class DirectStats:
+    """A direct solver iterates not: no iterations."""
+
+    iterations: list[int] = field(default_factory=list)
 
 
 class PardisoSolver:
@@ -48,8 +79,12 @@ class PardisoSolver:
         self._lu_only = False  # after LU_AFTER failures of the symmetric mode in a row
         self._misses = 0  # symmetric failures in a row
         self.lu_solves = 0  # matrices solved by the fallback
+        self.stats = DirectStats()
 
-    def solve(self, K: sp.csr_matrix, r: np.ndarray) -> np.ndarray:
+    def solve(self, K: sp.csr_matrix, r: np.ndarray, rtol: float | None = None,
+              x0: np.ndarray | None = None) -> np.ndarray:
+        """``x`` to the refinement's ``1e-10`` relative residual (``rtol`` and ``x0`` do not
+        apply to a direct solve)."""
         norm_r = max(float(np.linalg.norm(r)), 1e-300)
         residual = np.inf
         if not self._lu_only:
@@ -68,6 +103,9 @@ class PardisoSolver:
                 "matrix is near singular: check the boundary conditions and the mesh"
             )
         return _checked(x)
+
+    def new_load_step(self) -> None:
+        """Nothing to renew."""
 
     def release(self) -> None:
         """Free PARDISO's memory, the symbolic analysis too (a later solve redoes it)."""
@@ -195,15 +233,6 @@ def _point_pypardiso_to_mkl() -> None:
         os.environ["PYPARDISO_MKL_RT"] = str(found[0])
 
 
-class ScipySolver:
-    """SciPy's SuperLU, a fallback where MKL is not available."""
-
-    def solve(self, K: sp.csr_matrix, r: np.ndarray) -> np.ndarray:
-        import scipy.sparse.linalg as spla
-
-        return _checked(spla.spsolve(K.tocsc(), r))
-
-
 def _checked(x: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise ConvergenceError(
@@ -213,15 +242,13 @@ def _checked(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def make_linear_solver(name: str = "pardiso") -> LinearSolver:
-    """``"pardiso"`` (default) or ``"scipy"``."""
+def make_linear_solver(name: str = "pardiso", form=None) -> LinearSolver:
+    """``"pardiso"`` (direct, default) or ``"krylov"`` (GMRES preconditioned by blocks
+    built from ``form``'s spaces)."""
     if name == "pardiso":
-        try:
-            return PardisoSolver()
-        except ImportError:  # pragma: no cover - pypardiso is a declared dependency
-            return ScipySolver()
-    if name == "scipy":
-        return ScipySolver()
-    from brainbulge.errors import InputError
+        return PardisoSolver()
+    if name == "krylov":
+        from brainbulge.solver.krylov import BlockKrylovSolver
 
-    raise InputError(f"unknown linear solver {name!r}; choose 'pardiso' or 'scipy'")
+        return BlockKrylovSolver.from_form(form)
+    raise InputError(f"unknown linear solver {name!r}; choose 'pardiso' or 'krylov'")

@@ -388,11 +388,9 @@ class MiniTangent:
 
 def applies(form) -> bool:  # noqa: ANN001 - MixedForm
     """Whether :class:`MiniTangent` computes this form's tangent: 3D MINI, every region
-    Mooney-Rivlin, straight tets, no contact terms in the energy (point contacts are added
-    by Newton)."""
+    Mooney-Rivlin, straight tets (the contact terms are added by Newton)."""
     return (form.element == "mini" and form.dim == 3 and form.mesh.GetCurveOrder() == 1
-            and all(isinstance(m, MooneyRivlin) for m in form.problem.materials.values())
-            and not form.contact_multipliers)
+            and all(isinstance(m, MooneyRivlin) for m in form.problem.materials.values()))
 
 
 def _bubble_constant(V: ngs.FESpace, mesh: ngs.Mesh) -> float:

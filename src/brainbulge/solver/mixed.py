@@ -3,17 +3,12 @@
 Stationary point of the Lagrangian (MODEL.md section 2) over ``(u, p)``::
 
     Pi(u, p) = int_Omega [ psibar(F) + p (J - Js(t)) ] dV
-             + sum_contacts int_Gamma_c 1/(2 r) <lambda - r g(X + u)>_+^2 dA
 
 with ``Js(t) = 1 + t (Js - 1)`` the swelling ramped by the load factor ``t`` in [0, 1]. ``p``
-is the Lagrange multiplier of ``J = Js`` (tension positive). Contact is frictionless and
-unilateral against rigid obstacles with signed distance ``g`` (``g >= 0`` admissible), by an
-augmented Lagrangian: ``r`` is the penalty, ``lambda >= 0`` the contact pressure, updated by
-Uzawa's rule ``lambda <- s(lambda - r g)`` until the penetration is below tolerance. ``s`` is
-a C1-smoothed ramp ``<z>_+`` (width ``eps = 0.02 mu``), and the obstacle is offset by
-``eps/(2r)`` so that ``g = 0`` is the converged state wherever the contact pressure exceeds
-``eps``. The contact term written above with ``<.>_+^2/(2r)`` is, precisely,
-``S(lambda - r g)/r`` with ``S' = s``.
+is the Lagrange multiplier of ``J = Js`` (tension positive). Contact with the rigid skull is
+frictionless and unilateral, with exact multipliers at the boundary's contact points
+(:mod:`brainbulge.solver.contact`): their forces are added to the residual outside the
+energy.
 
 NGSolve's ``Variation`` differentiates ``Pi`` symbolically: residual and tangent come exactly
 from the energy. Inf-sup stable pairs: Taylor-Hood P2/P1 (2D and 3D) and MINI, P1 + bubble /
@@ -22,7 +17,6 @@ P1, with the bubbles condensed statically.
 
 from __future__ import annotations
 
-import logging
 import re
 
 import ngsolve as ngs
@@ -33,9 +27,7 @@ from brainbulge.materials.kinematics import deformation_gradient
 from brainbulge.materials.mooney_rivlin import MooneyRivlin, mooney_rivlin_psi
 from brainbulge.model.problem import Problem
 from brainbulge.solver.compile_cache import compilation_failed, native_compiler_ready
-from brainbulge.solver.point_contact import PointContact
-
-log = logging.getLogger(__name__)
+from brainbulge.solver.contact.points import PointContact
 
 ELEMENTS = ("taylor-hood", "mini")
 
@@ -47,7 +39,6 @@ class MixedForm:
         self,
         problem: Problem,
         element: str = "taylor-hood",
-        contact_penalty: float | None = None,
         compile_energy: bool = False,
     ) -> None:
         if element not in ELEMENTS:
@@ -96,47 +87,11 @@ class MixedForm:
             W = _compiled(self._psi_iso(F) + p * (J - Js_t), compile_energy)
             self.a += ngs.Variation(W * ngs.dx)
 
-        # contact: augmented Lagrangian with a multiplier field on each contact boundary
+        # contact: the skull's contact points, with exact multipliers (the active set)
         self.mu_max = max(m.shear_modulus for m in problem.materials.values())
-        self.contact_multipliers: list[ngs.GridFunction] = []
-        self.contact_gaps: list[ngs.CoefficientFunction] = []
-        self.contact_regions: list[ngs.Region] = []
-        self.contact_masks: list[ngs.CoefficientFunction] = []
-        self._contact_z: list[ngs.CoefficientFunction] = []
-        h = _mesh_size(mesh)
-        self.h = h
-        self.r0 = contact_penalty if contact_penalty is not None else 100 * self.mu_max / h
-        self.r = ngs.Parameter(self.r0)  # raised by penalty continuation at the final load
-        self.eps_c = 0.02 * self.mu_max  # smoothing of the contact law [kPa]
-        self.g_off = self.eps_c / (2 * self.r)  # makes g = 0 the fixed point of Uzawa
-        X = ngs.CF((ngs.x, ngs.y, ngs.z)[:dim])
-        self.point_contacts: list[PointContact] = []
-        for c in problem.contacts:
-            if c.active_set:  # exact multipliers at the nodes
-                self.point_contacts.append(PointContact(self, c.boundary, c.obstacle))
-                continue
-            region = mesh.Boundaries(c.boundary)
-            if not any(region.Mask()):
-                raise InputError(f"contact boundary {c.boundary!r} matches no mesh boundary")
-            # multiplier and initial gap: discontinuous per boundary facet, so that the Uzawa
-            # update is a local projection that does not smear the peaked contact pressure
-            L = ngs.SurfaceL2(mesh, order=3, definedon=region)
-            lam = ngs.GridFunction(L)
-            # initial-gap adjustment (as Abaqus' "adjust"): the curved mesh boundary lies on
-            # the skull only up to the geometric error, ~1e-6 R; gaps and overclosures below
-            # 1e-3 h at rest are removed, so a boundary that rests on the skull touches it
-            g_rest = c.obstacle.gap(X)
-            g0 = ngs.GridFunction(L)
-            g0.Set(ngs.IfPos(1e-3 * h - ngs.Norm(g_rest), g_rest, 0), ngs.BND, definedon=region)
-            g = c.obstacle.gap(X + u) - g0
-            Wc = contact_energy(lam - self.r * (g - self.g_off), self.r, self.eps_c)
-            self.a += ngs.Variation(Wc * ngs.ds(definedon=region))
-            self.contact_multipliers.append(lam)
-            self.contact_regions.append(region)
-            self.contact_masks.append(boundary_indicator(mesh, c.boundary))
-            u_gf = self.gfu.components[0]
-            self.contact_gaps.append(c.obstacle.gap(X + u_gf) - g0)
-            self._contact_z.append(lam - self.r * (self.contact_gaps[-1] - self.g_off))
+        self.h = _mesh_size(mesh)
+        self.point_contacts = [PointContact(self, c.boundary, c.obstacle)
+                               for c in problem.contacts]
 
     def _psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         """Isochoric energy over all regions: one expression with region-wise coefficients."""
@@ -154,7 +109,7 @@ class MixedForm:
 
     @property
     def contacts_present(self) -> bool:
-        return bool(self.contact_multipliers or self.point_contacts)
+        return bool(self.point_contacts)
 
     # --- fields of the current state -------------------------------------------------
     @property
@@ -210,30 +165,18 @@ class MixedForm:
     def Js_current(self) -> ngs.CoefficientFunction:
         return 1 + self.load * (self.Js - 1)
 
-    def update_contact_multipliers(self) -> None:
-        """Uzawa update ``lambda <- <lambda - r g>_+`` on each contact boundary."""
-        for lam, z, region in zip(
-            self.contact_multipliers, self._contact_z, self.contact_regions, strict=True
-        ):
-            lam.Set(contact_pressure_law(z, self.eps_c), ngs.BND, definedon=region)
-
     def multiplier_state(self) -> list[np.ndarray]:
-        """A copy of every contact multiplier (to undo a failed step)."""
-        state = [lam.vec.FV().NumPy().copy() for lam in self.contact_multipliers]
-        return state + [pc.lam.copy() for pc in self.point_contacts]
+        """A copy of every contact multiplier ``lambda`` (to undo a failed step)."""
+        return [pc.lam.copy() for pc in self.point_contacts]
 
     def restore_multipliers(self, state: list[np.ndarray]) -> None:
-        n = len(self.contact_multipliers)
-        for lam, v in zip(self.contact_multipliers, state[:n], strict=True):
-            lam.vec.FV().NumPy()[:] = v
-        for pc, v in zip(self.point_contacts, state[n:], strict=True):
+        for pc, v in zip(self.point_contacts, state, strict=True):
             pc.lam = v.copy()
 
     def contact_pressure(self) -> ngs.CoefficientFunction:
-        """Current contact pressure ``<lambda - r g>_+`` [kPa] (zero off contact)."""
+        """Current contact pressure ``lambda |grad g|`` [kPa] at the contact points, as a
+        boundary field (zero off contact)."""
         total = ngs.CF(0)
-        for z, mask in zip(self._contact_z, self.contact_masks, strict=True):
-            total = total + contact_pressure_law(z, self.eps_c) * mask
         for pc in self.point_contacts:
             total = total + pc.fields()[0]
         return total
@@ -241,35 +184,9 @@ class MixedForm:
     def gap(self) -> ngs.CoefficientFunction:
         """Signed distance to the obstacle on contact boundaries (large elsewhere) [length]."""
         total = ngs.CF(0)
-        for g, mask in zip(self.contact_gaps, self.contact_masks, strict=True):
-            total = total + ngs.IfPos(mask - 0.5, g, 0)
         for pc in self.point_contacts:
             total = total + pc.fields()[1]
         return total
-
-
-def contact_pressure_law(z: ngs.CoefficientFunction, eps: float) -> ngs.CoefficientFunction:
-    """Smoothed ramp ``s(z)``: 0 for z <= 0, ``z^2/(2 eps)`` up to ``eps``, ``z - eps/2`` above.
-
-    A C1 contact law keeps the Newton tangent continuous when integration points enter or
-    leave contact (a sharp ``<z>_+`` made the active set chatter at the opening's corners).
-    """
-    return ngs.IfPos(z, ngs.IfPos(z - eps, z - eps / 2, z * z / (2 * eps)), 0)
-
-
-def contact_energy(z: ngs.CoefficientFunction, r: float, eps: float) -> ngs.CoefficientFunction:
-    """Potential with ``d/dg = -s(z)`` for ``z = lambda - r g``: ``S(z)/r``, ``S' = s``."""
-    S = ngs.IfPos(z, ngs.IfPos(z - eps, z * z / 2 - eps * z / 2 + eps**2 / 6, z**3 / (6 * eps)), 0)
-    return S / r
-
-
-def boundary_indicator(mesh: ngs.Mesh, pattern: str) -> ngs.CoefficientFunction:
-    """1 on boundaries whose name matches the regex ``pattern``, 0 elsewhere."""
-    import re
-
-    rx = re.compile(f"^(?:{pattern})$")
-    names = {b for b in mesh.GetBoundaries() if rx.match(b)}
-    return mesh.BoundaryCF({b: 1.0 for b in names}, default=0.0)
 
 
 def _pressure_zones(problem: Problem) -> list[str]:

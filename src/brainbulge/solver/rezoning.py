@@ -34,9 +34,10 @@ from brainbulge.geometry.rezone import (
     vertex_values,
 )
 from brainbulge.model.problem import Problem
+from brainbulge.solver.contact.points import edge_bubble_midpoint_value
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
-from brainbulge.solver.point_contact import edge_bubble_midpoint_value
+from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver.options import Solution, SolverOptions
 from brainbulge.solver.sequencing import carry_contact_pressures
 
 log = logging.getLogger("brainbulge")
@@ -68,9 +69,9 @@ def solve_with_rezoning(
     rezoning: Rezoning,
     element: str = "taylor-hood",
     options: SolverOptions | None = None,
-) -> tuple[Solution, NewtonSolver]:
-    """Ramp the swelling to full load, rezoning as needed; the last solver holds the final
-    mesh and state. ``Solution.rezones`` counts the mesh exchanges."""
+) -> Solution:
+    """Ramp the swelling to full load, rezoning as needed; the solution's form holds the
+    final mesh and state. ``Solution.rezones`` counts the mesh exchanges."""
     options = options or SolverOptions()
     start = time.perf_counter()
     form = MixedForm(problem, element=element)
@@ -126,10 +127,10 @@ def solve_with_rezoning(
     total.rezones = rezones
     total.wall_time_s = time.perf_counter() - start
     if not sol.converged and not sol.message:
-        total.message = f"stopped at load {sol.load:.4f}"
+        total.note = f"stopped at load {sol.load:.4f}"
     if failed and not sol.converged:
-        total.message += f" ({failed})"
-    return total, solver
+        total.context = failed
+    return total
 
 
 def _straighten_folded(form: MixedForm) -> None:

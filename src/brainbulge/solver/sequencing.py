@@ -48,7 +48,8 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates, vertex_dofs
 from brainbulge.geometry.rezone import vertex_values
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver, Solution, SolverOptions
+from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver.options import Solution, SolverOptions
 
 log = logging.getLogger("brainbulge")
 
@@ -146,12 +147,13 @@ COARSE_TOLERANCE = 1e-4
 
 def solve_sequenced(
     coarse: MixedForm, fine: MixedForm, options: SolverOptions
-) -> tuple[Solution, NewtonSolver, Sequenced]:
+) -> tuple[Solution, Sequenced]:
     """Ramp the load on ``coarse``, carry its state to ``fine`` and converge there at full
     load; if that fails, ramp on ``fine`` from ``Js = 1``. Returns the fine solution (its
     times and Krylov iterations include the coarse stage, its Newton iterations are the fine
-    mesh's), its solver and the coarse stage's record. ``options`` apply to both meshes
-    (the coarse one without restart file or progress bar, and to :data:`COARSE_TOLERANCE`)."""
+    mesh's) and the coarse stage's record; the linear solvers' memory is released.
+    ``options`` apply to both meshes (the coarse one without restart file or progress bar,
+    and to :data:`COARSE_TOLERANCE`)."""
     t0 = time.perf_counter()
     coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False,
                                      tolerance=max(options.tolerance, COARSE_TOLERANCE))
@@ -172,7 +174,8 @@ def solve_sequenced(
         record.initial_residual = solver.history[-1][0] if solver.history else None
         record.fine_converged = sol.converged
         if sol.converged:
-            return _with_coarse_costs(sol, csol, t0), solver, record
+            solver.release_linear_solver()
+            return _with_coarse_costs(sol, csol, t0), record
         log.warning("  the coarse solution did not converge on the fine mesh (%s); "
                     "ramping the load there from Js = 1", sol.message)
     else:
@@ -182,7 +185,8 @@ def solve_sequenced(
     fine.restore_multipliers([np.zeros_like(v) for v in fine.multiplier_state()])
     fine.set_load(0.0)
     sol = solver.solve()
-    return _with_coarse_costs(sol, csol, t0), solver, record
+    solver.release_linear_solver()
+    return _with_coarse_costs(sol, csol, t0), record
 
 
 def _with_coarse_costs(sol: Solution, coarse: Solution, t0: float) -> Solution:

@@ -12,14 +12,13 @@ one; its Gram-Schmidt is limited inside the Krylov loop).
 
 from __future__ import annotations
 
-from contextlib import AbstractContextManager, nullcontext
+from contextlib import AbstractContextManager
 
 
 def serial_openblas() -> AbstractContextManager:
     """Context in which OpenBLAS (NumPy's and NGSolve's) runs on one thread; MKL (PARDISO)
-    and NGSolve's task manager keep theirs."""
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # pragma: no cover - threadpoolctl is a declared dependency
-        return nullcontext()
+    and NGSolve's task manager keep theirs. (threadpoolctl is imported here, not at the
+    package's import: importing it sets ``KMP_DUPLICATE_LIB_OK``.)"""
+    from threadpoolctl import ThreadpoolController
+
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)

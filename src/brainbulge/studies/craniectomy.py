@@ -67,7 +67,8 @@ from brainbulge.results.run_record import atomic_output, atomic_write_json, atom
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
 from brainbulge.results.views3d import write_study_surfaces, write_surface_views
-from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
+from brainbulge.solver.ramp import equilibrate
 from brainbulge.solver.sequencing import solve_sequenced
 
 log = logging.getLogger("brainbulge")
@@ -108,7 +109,7 @@ def run_brain(
 
 @dataclasses.dataclass
 class BrainRun:
-    """A solved 3D scenario: its case, mesh, form, solver and solution; ``sequenced``: the
+    """A solved 3D scenario: its case, mesh, form and solution; ``sequenced``: the
     coarse stage of mesh sequencing (None without); ``started``: ``True`` when Newton
     converged from a given start state (``solve_brain(start=...)``), ``False`` when it did
     not and the load was ramped from ``Js = 1``, None without a start."""
@@ -116,7 +117,6 @@ class BrainRun:
     case: CraniectomyCase
     bm: BrainMesh
     form: MixedForm
-    solver: NewtonSolver
     sol: Any
     sequenced: Any = None
     started: bool | None = None
@@ -161,14 +161,13 @@ def solve_brain(
         _check_same_domain(coarse_bm, bm)
         coarse = MixedForm(brain_problem(coarse_bm, case), element=case.element,
                            compile_energy=case.compile)
-        sol, solver, sequenced = solve_sequenced(coarse, form, options)
+        sol, sequenced = solve_sequenced(coarse, form, options)
         del coarse
     else:
         if start is not None and not restart.is_file() and start(form):
             solver = NewtonSolver(form, dataclasses.replace(
-                options, carried_curvature_tolerance=np.inf,
-                max_iterations=START_MAX_ITERATIONS))
-            sol = solver.equilibrate()
+                options, max_iterations=START_MAX_ITERATIONS))
+            sol = equilibrate(solver, curvature_below=np.inf)
             started = sol.converged
             if not sol.converged:
                 log.info("  no convergence from the start state (%s): ramping the load",
@@ -180,10 +179,10 @@ def solve_brain(
         if started is not True:
             solver = NewtonSolver(form, options)
             sol = solver.solve()
-    solver.release_linear_solver()
+        solver.release_linear_solver()
     if sol.converged:
         restart.unlink(missing_ok=True)
-    return BrainRun(case, bm, form, solver, sol, sequenced, started)
+    return BrainRun(case, bm, form, sol, sequenced, started)
 
 
 def write_brain_outputs(run: BrainRun, out_dir: Path,
@@ -194,7 +193,7 @@ def write_brain_outputs(run: BrainRun, out_dir: Path,
     case, bm, form, sol = run.case, run.bm, run.form, run.sol
     out_dir = Path(out_dir)
     fibres = _fibres(case, bm)
-    summary = brain_summary(case, bm, form, run.solver, sol, fibres)
+    summary = brain_summary(case, bm, sol, fibres)
     summary["mesh_sequencing"] = (None if run.sequenced is None
                                   else dataclasses.asdict(run.sequenced))
     summary.update(extra or {})
@@ -202,7 +201,7 @@ def write_brain_outputs(run: BrainRun, out_dir: Path,
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
-    state = "" if sol.converged else f" (stopped at Js = {1 + sol.load * (case.swelling - 1):.3f})"
+    state = "" if sol.converged else f" (stopped at Js = {sol.swelling_reached:.3f})"
     section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
     write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
     atomic_write_json(out_dir / "summary.json", summary)
@@ -241,12 +240,11 @@ def _check_same_domain(coarse: BrainMesh, fine: BrainMesh) -> None:
 def brain_summary(
     case: CraniectomyCase,
     bm: BrainMesh,
-    form: MixedForm,
-    solver: NewtonSolver,
-    sol,
+    sol: Solution,
     fibres=None,
 ) -> dict[str, Any]:
     """``summary.json`` of a 3D scenario (see the module docstring)."""
+    form = sol.form
     skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
     flap = bm.flaps[case.flap]
     band = case.edge_exclusion_mm
@@ -264,7 +262,7 @@ def brain_summary(
         "case": case.name,
         "inputs": dataclasses.asdict(case),
         **solution_summary(
-            sol, solver, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
+            sol, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
             tissue=PARENCHYMA, fibres=fibres,
         ),
     }
@@ -273,7 +271,7 @@ def brain_summary(
     out["edge_exclusion_mm"] = band
     out.pop("edge_exclusion", None)
     out.pop("singular_points", None)
-    out["swelling_reached"] = 1 + sol.load * (case.swelling - 1)
+    out["swelling_reached"] = sol.swelling_reached
     # vertex displacements
     u = _vertex_displacements(form, bm)
     out.update(brain_outputs(bm, form, u, PARENCHYMA, SWELL_SIDES[case.swell]))

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from brainbulge.errors import ConvergenceError
+from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.model.problem import case_from_config
 from brainbulge.results.export import (
@@ -33,8 +33,7 @@ from brainbulge.results.export import (
 from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
 from brainbulge.results.run_record import atomic_output, atomic_write_json
 from brainbulge.results.summary import solution_summary
-from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
-from brainbulge.solver.newton import DIVERGENCE_ADVICE
+from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.rezoning import Rezoning, solve_with_rezoning
 from brainbulge.studies.runner import stopped_summary
 
@@ -52,7 +51,12 @@ DISK_POSITIONS = (
 
 
 def case_from_dict(config: dict[str, Any]) -> HemidiskCase:
-    """A :class:`HemidiskCase` from a plain dict (TOML table, CLI, study scenario)."""
+    """A :class:`HemidiskCase` from a plain dict (TOML table, CLI, study scenario); the
+    ``contact_method = "active-set"`` of older run files is accepted (the only method)."""
+    config = dict(config)
+    if config.pop("contact_method", "active-set") != "active-set":
+        raise InputError("contact_method 'augmented' is no longer available: contact is solved "
+                         "by the active set; remove contact_method from the case")
     return case_from_config(HemidiskCase, config, "hemidisk")
 
 
@@ -71,17 +75,18 @@ def run_hemidisk(
         rezoning = Rezoning(lambda mesh: hemidisk_problem(case, mesh), geo.project,
                             case.mesh_size * case.R, case.corner_h, geo.singular_points(),
                             geo.rim_points(case.edge_exclusion * case.R, rim_h or 0.0), rim_h)
-        sol, solver = solve_with_rezoning(problem, rezoning, case.element, options)
+        sol = solve_with_rezoning(problem, rezoning, case.element, options)
     else:
         solver = NewtonSolver(MixedForm(problem, element=case.element), options)
         sol = solver.solve()
+        del solver
     form = sol.form
     centre = np.zeros(2)
     summary: dict[str, Any] = {
         "case": case.name,
         "inputs": dataclasses.asdict(case),
         **solution_summary(
-            sol, solver, centre, geo.singular_points(), case.edge_exclusion * case.R
+            sol, centre, geo.singular_points(), case.edge_exclusion * case.R
         ),
     }
     summary["rezones"] = sol.rezones
@@ -92,14 +97,14 @@ def run_hemidisk(
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
-    js = reached_swelling(case.swelling, sol.load)
+    js = sol.swelling_reached
     state = "" if sol.converged else f" (stopped at Js {js:.3f}, load {sol.load:.3f})"
     plot_fields(vf, out_dir / "fields.png", title=f"{_label(case)}{state}",
                 mark=summary.get("failure_site"))
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
         raise ConvergenceError(
-            f"{stopped_message(case, sol.message, summary.get('failure_site'))}; partial "
+            f"{stopped_message(case, sol)}; partial "
             f"results (up to Js = {js:.3f}) in {out_dir}")
     return summary
 
@@ -113,12 +118,13 @@ CUT_EDGE_ADVICE = (
 )
 
 
-def stopped_message(case: HemidiskCase, message: str, site: Any) -> str:
-    """The solver's message for a stopped ramp, its closing advice replaced by
-    :data:`CUT_EDGE_ADVICE` when the largest unbalanced force sat at a rounded cut edge."""
+def stopped_message(case: HemidiskCase, sol: Solution) -> str:
+    """Why the ramp of ``sol`` stopped, with :data:`CUT_EDGE_ADVICE` as the advice when
+    the largest unbalanced force sat at a rigid skull's rounded cut edge."""
+    site = sol.failure_site
     if site is None or case.skull != "rigid" or not case.obstacle.near_cut_edge(np.asarray(site)):
-        return message
-    return message.replace(DIVERGENCE_ADVICE, CUT_EDGE_ADVICE)
+        return sol.describe()
+    return sol.describe(CUT_EDGE_ADVICE)
 
 
 def _expected_area_ratio(case: HemidiskCase) -> float:

@@ -1,7 +1,7 @@
-"""Frictionless contact with a rigid body known only through a NumPy signed distance.
+"""Frictionless contact with a rigid body known through a NumPy signed distance.
 
-The 3D skull is a signed distance sampled on the MRI grid (:class:`RigidSkull`), not a
-symbolic expression, so the symbolic contact term of :mod:`mixed` cannot use it. Here the
+The skull is a signed distance on point arrays (the 2D skull arc, or the 3D one sampled on
+the MRI grid, :class:`RigidSkull`). The
 contact is enforced at *contact points* of the boundary: its vertices (and, for P2
 displacements, its edge midpoints), each with a lumped reference area ``A_i``. At the deformed
 position ``x_i = X_i + (P d)_i`` (``P`` evaluates the displacement DOFs ``d`` at the points)
