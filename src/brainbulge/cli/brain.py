@@ -24,10 +24,10 @@ from brainbulge.cli import (
 from brainbulge.geometry.brain.defaults import (
     EDGE_RADIUS_MM,
     FIXATIONS,
+    LARGE_TETS,
     SUPERIOR_ELEVATION_DEG,
     SUPERIOR_WIDTH_MM,
 )
-from brainbulge.model.brain import LARGE_TETS
 
 
 def add_parser(sub: Any) -> None:

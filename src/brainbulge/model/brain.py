@@ -26,6 +26,7 @@ from brainbulge.geometry.brain import BrainMesh, to_ngsolve
 from brainbulge.geometry.brain.boundaries import UNILATERAL_DIAMETER_MM, SuperiorBand
 from brainbulge.geometry.brain.defaults import (
     FIXATIONS,
+    LARGE_TETS,
     SUPERIOR_ELEVATION_DEG,
     SUPERIOR_WIDTH_MM,
 )
@@ -36,9 +37,6 @@ from brainbulge.model.problem import Contact, Problem
 FLAPS = ("frontal", "left", "right", "custom", "none")
 SWELL_SIDES = {"both": ("left", "right"), "left": ("left",), "right": ("right",)}
 
-#: from this many requested tets up the defaults are those of a large mesh
-#: (:func:`size_defaults`): below it PARDISO on one Netgen mesh is quicker and lighter
-LARGE_TETS = 400_000
 
 
 def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None = None,

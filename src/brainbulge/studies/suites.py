@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from brainbulge.model.brain import LARGE_TETS, size_defaults
+from brainbulge.geometry.brain.defaults import LARGE_TETS
 
 STUDIES = ("hemidisk-sector", "hemidisk-disk", "craniectomy")
 
@@ -108,6 +108,8 @@ def demo_scenarios(plan: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
 
 def paper_brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, Any]:
     """The options shared by the reproduction's six 3D scenarios at ``tets`` tets."""
+    from brainbulge.model.brain import size_defaults
+
     common: dict[str, Any] = {"tets": tets, "brain_volume_ml": PAPER_BRAIN_VOLUME_ML,
                               "steps": 4, "fix": fix}
     if tets >= LARGE_TETS:  # a refined mesh, sequencing on the unrefined one, Krylov

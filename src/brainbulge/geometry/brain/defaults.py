@@ -20,3 +20,8 @@ SUPERIOR_WIDTH_MM = 10.0
 #: (deg). The sinus runs along the whole vault from the crista galli to the torcula; above the
 #: centre it lies against the convexity (below, it reaches the skull base and the tentorium).
 SUPERIOR_ELEVATION_DEG = 0.0
+
+#: from this many requested tets up the defaults are those of a large mesh
+#: (:func:`brainbulge.model.brain.size_defaults`): below it PARDISO on one Netgen mesh is
+#: quicker and lighter
+LARGE_TETS = 400_000
