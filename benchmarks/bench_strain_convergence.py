@@ -98,7 +98,7 @@ def main() -> int:
     from brainbulge.geometry.brain import load_brain_mesh
     from brainbulge.model.brain import CraniectomyCase, brain_problem
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
-    from brainbulge.solver.sequencing import solve_sequenced
+    from brainbulge.solver.remesh.sequencing import solve_sequenced
 
     base = load_brain_mesh(Path(args.mesh))
     case = CraniectomyCase(flap="left", swell="both", swelling=1.1, steps=args.steps)

@@ -1,4 +1,4 @@
-"""Nonlinear elimination of a residual hotspot (:mod:`brainbulge.solver.hotspot`) on the
+"""Nonlinear elimination of a residual hotspot (:mod:`brainbulge.solver.fast.hotspot`) on the
 capped ball of test_point_contact (MINI, a swelling sphere sliding in a spherical skull).
 
 From the converged state with one vertex displaced, the residual sits at that vertex; the
@@ -15,7 +15,7 @@ import pytest
 
 from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 from brainbulge.solver import SolverOptions, mixed
-from brainbulge.solver.hotspot import HotspotRelaxation, _LocalProblem
+from brainbulge.solver.fast.hotspot import HotspotRelaxation, _LocalProblem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from test_point_contact import A, _capped_ball

@@ -1,4 +1,4 @@
-"""The closed-form MINI tangent (:mod:`brainbulge.solver.mini_tangent`).
+"""The closed-form MINI tangent (:mod:`brainbulge.solver.fast.mini_tangent`).
 
 Its Hessian against finite differences of the closed-form stress, its assembled and
 condensed matrix and bubble operators against NGSolve's AD of the energy, and Newton's
@@ -15,7 +15,7 @@ from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
-from brainbulge.solver.mini_tangent import MiniTangent, _hessian, applies
+from brainbulge.solver.fast.mini_tangent import MiniTangent, _hessian, applies
 
 SOFT = MooneyRivlin(0.03, 33.3)
 STIFF = MooneyRivlin(0.28, 333.0)

@@ -12,7 +12,7 @@ from brainbulge.geometry.hemidisk import Hemidisk
 from brainbulge.geometry.rezone import _topology, deformed_quality, rezone, triangle_quality
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
-from brainbulge.solver.rezoning import Rezoning, solve_with_rezoning
+from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
 
 
 def _map(X: np.ndarray) -> np.ndarray:

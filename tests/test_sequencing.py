@@ -1,4 +1,4 @@
-"""Mesh sequencing (:mod:`brainbulge.solver.sequencing`) on the capped ball of
+"""Mesh sequencing (:mod:`brainbulge.solver.remesh.sequencing`) on the capped ball of
 test_point_contact: a swelling sphere in an incompressible ball octant sliding in a rigid
 spherical skull with polar openings, meshed twice (h = 0.3 and 0.15).
 
@@ -22,7 +22,7 @@ from brainbulge.solver import ramp as solver_ramp
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.options import DIVERGENCE_ADVICE, Solution
-from brainbulge.solver.sequencing import interpolate_state, solve_sequenced
+from brainbulge.solver.remesh.sequencing import interpolate_state, solve_sequenced
 from test_point_contact import A, _capped_ball
 
 OPTIONS = SolverOptions(steps=2)
@@ -251,7 +251,7 @@ def test_vertex_fields_give_the_vertex_values():
 def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     """The coarse state is only a start: its Newton stops at COARSE_TOLERANCE, the fine
     mesh's at the requested tolerance."""
-    from brainbulge.solver import sequencing
+    from brainbulge.solver.remesh import sequencing
 
     histories = []
 

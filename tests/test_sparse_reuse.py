@@ -3,7 +3,12 @@
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, PatternProject, _same_array
+from brainbulge.solver.linear.sparse_reuse import (
+    PatternAdd,
+    PatternGather,
+    PatternProject,
+    _same_array,
+)
 
 
 def _matrix(seed: int, n: int = 60, density: float = 0.1) -> sp.csr_matrix:

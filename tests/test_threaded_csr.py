@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from brainbulge.solver import threaded_csr
-from brainbulge.solver.threaded_csr import ThreadedCSR, row_blocks, threaded
+from brainbulge.solver.linear import threaded_csr
+from brainbulge.solver.linear.threaded_csr import ThreadedCSR, row_blocks, threaded
 
 
 def _banded(m: int, n: int, per_row: int, seed: int = 0) -> sp.csr_matrix:

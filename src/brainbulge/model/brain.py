@@ -107,7 +107,7 @@ class CraniectomyCase:
             ``inferior+superior`` (and the band along the superior midline).
         superior_width_mm, superior_elevation_deg: the superior band's width across the
             mid-sagittal plane [mm] and its lowest elevation seen from the brain centre [deg].
-        coarse_tets: mesh sequencing (:mod:`brainbulge.solver.sequencing`): ramp the load
+        coarse_tets: mesh sequencing (:mod:`brainbulge.solver.remesh.sequencing`): ramp the load
             first on a mesh of about this many tets of the same geometry, then start the fine
             mesh's Newton at full load from its solution (MINI only; fewer fine iterations);
             0: none.

@@ -2,7 +2,7 @@
 
 The state ``x = (u, p)`` on the free DOFs, with the contact pressures ``lambda``, solves
 ``R(x) = 0``: the stationarity of MODEL.md section 2's Lagrangian (NGSolve's ``Variation``,
-or the closed-form MINI tangent of :mod:`brainbulge.solver.mini_tangent`) plus the contact
+or the closed-form MINI tangent of :mod:`brainbulge.solver.fast.mini_tangent`) plus the contact
 forces ``-B^T lambda`` and the complementarity of the active set
 (:mod:`brainbulge.solver.contact`). MINI's bubbles are condensed statically: the direction
 is solved on the vertex DOFs and extended into the bubbles.
@@ -21,8 +21,8 @@ from brainbulge.heap import release_free_memory
 from brainbulge.solver.contact.active_set import ActiveSet
 from brainbulge.solver.inexact import ETA_MAX
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
+from brainbulge.solver.linear.sparse_reuse import PatternAdd, PatternGather, PatternProject
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.sparse_reuse import PatternAdd, PatternGather, PatternProject
 
 log = logging.getLogger("brainbulge")
 
@@ -36,7 +36,8 @@ class MixedEquations:
         self.linear: LinearSolver = make_linear_solver(linear_solver, form)
         self.closed = None  # the closed-form tangent, where it applies
         if form.element == "mini" and form.dim == 3:
-            from brainbulge.solver import mini_tangent  # (Numba, ~0.5 s: only where it may apply)
+            # (Numba, ~0.5 s: imported only where it may apply)
+            from brainbulge.solver.fast import mini_tangent
 
             if mini_tangent.applies(form):
                 try:
@@ -78,7 +79,7 @@ class MixedEquations:
 
     def _new_plans(self) -> None:
         """The tangent's pattern is the same at every iteration: it is sliced and added to
-        by plans (:mod:`brainbulge.solver.sparse_reuse`), made at the first tangent."""
+        by plans (:mod:`brainbulge.solver.linear.sparse_reuse`), made at the first tangent."""
         self._free_part = PatternGather(lambda K: K[self.free][:, self.free])
         self._add_curvature = PatternAdd()
         self._project_elimination = PatternProject()

@@ -26,7 +26,7 @@ from brainbulge.errors import ConvergenceError
 from brainbulge.model.problem import Problem
 from brainbulge.solver import ramp
 from brainbulge.solver.equations import MixedEquations
-from brainbulge.solver.hotspot import HotspotRelaxation
+from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.inexact import ETA_MAX, ETA_MIN, forcing_term
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Solution, SolverOptions
@@ -45,8 +45,8 @@ class NewtonSolver(MixedEquations):
     """Newton + load stepping for a :class:`MixedForm`.
 
     Two accelerations apply where they can, each the plain path's result to round-off:
-    ``closed`` (the closed-form MINI tangent, :mod:`brainbulge.solver.mini_tangent`) and
-    ``relaxation`` (local solves at residual hotspots, :mod:`brainbulge.solver.hotspot`);
+    ``closed`` (the closed-form MINI tangent, :mod:`brainbulge.solver.fast.mini_tangent`) and
+    ``relaxation`` (local solves at residual hotspots, :mod:`brainbulge.solver.fast.hotspot`);
     either set to None after construction takes the plain path.
     """
 

@@ -132,7 +132,7 @@ class Solution:
     solve_time_s: float = 0.0
     linear_iterations: int = 0  # Krylov iterations in all (0 with a direct solver)
     stopped_early: bool = False  # by ``SolverOptions.stop_when``, not by a failure
-    rezones: int = 0  # mesh exchanges (see :mod:`brainbulge.solver.rezoning`)
+    rezones: int = 0  # mesh exchanges (see :mod:`brainbulge.solver.remesh.rezoning`)
     resumed_from: float = 0.0  # load of the restart file the ramp went on from (0: none)
     max_penetration: float = 0.0
     target_swelling: float = 1.0  # the largest |Js - 1| of the problem's regions, as Js

@@ -135,7 +135,7 @@ def ramp_load(solver: NewtonSolver) -> Solution:
 def equilibrate(solver: NewtonSolver,
                 curvature_below: float = CARRIED_CURVATURE_TOLERANCE) -> Solution:
     """Newton at the form's current load from its current state (one carried over from
-    another mesh, :mod:`brainbulge.solver.sequencing`, or another flap's solution), to the
+    another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's solution), to the
     final tolerance, without load steps, the curvature term of the contacts entering the
     tangent only below ``curvature_below`` (default :data:`CARRIED_CURVATURE_TOLERANCE`;
     ``inf``: always). On failure the state is restored and ``converged`` is false."""

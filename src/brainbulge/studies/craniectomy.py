@@ -69,7 +69,7 @@ from brainbulge.results.summary import solution_summary
 from brainbulge.results.views3d import write_surface_views
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.ramp import equilibrate
-from brainbulge.solver.sequencing import solve_sequenced
+from brainbulge.solver.remesh.sequencing import solve_sequenced
 
 log = logging.getLogger("brainbulge")
 

@@ -34,7 +34,7 @@ from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_si
 from brainbulge.results.run_record import atomic_output, atomic_write_json
 from brainbulge.results.summary import solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
-from brainbulge.solver.rezoning import Rezoning, solve_with_rezoning
+from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
 from brainbulge.studies.runner import stopped_summary
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)

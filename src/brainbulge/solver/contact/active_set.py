@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from brainbulge.solver.contact.points import PointContact
 from brainbulge.solver.contact.saddle import NodalElimination, augmented, coo_sum
-from brainbulge.solver.sparse_reuse import PatternProject
+from brainbulge.solver.linear.sparse_reuse import PatternProject
 
 
 class ActiveSet:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.solver.sparse_reuse import PatternProject
+from brainbulge.solver.linear.sparse_reuse import PatternProject
 
 
 def coo_sum(

@@ -38,7 +38,7 @@ from brainbulge.solver.contact.points import edge_bubble_midpoint_value
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.options import Solution, SolverOptions
-from brainbulge.solver.sequencing import carry_contact_pressures
+from brainbulge.solver.remesh.sequencing import carry_contact_pressures
 
 log = logging.getLogger("brainbulge")
 

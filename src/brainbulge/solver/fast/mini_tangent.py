@@ -52,7 +52,7 @@ import scipy.sparse as sp
 
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
-from brainbulge.solver.threaded_csr import threads
+from brainbulge.solver.linear.threaded_csr import threads
 
 log = logging.getLogger(__name__)
 # Numba's compiler logs every pass at DEBUG: tens of thousands of lines in a run's log

@@ -1,51 +1,20 @@
-"""Linear solves behind one small interface, :class:`LinearSolver`.
+"""The direct linear solver: MKL PARDISO on the exported tangent (:class:`PardisoSolver`).
 
 NGSolve assembles; its own sparse direct solvers were measured 2-3x slower than MKL PARDISO
-on the hemidisk, so the tangent is exported to SciPy CSR and factorised by ``pypardiso``
-(:class:`PardisoSolver`). The iterative alternative is block-preconditioned GMRES
-(:class:`brainbulge.solver.krylov.BlockKrylovSolver`).
+on the hemidisk, so the tangent is exported to SciPy CSR and factorised by ``pypardiso``.
 """
 
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.errors import ConvergenceError
 
 log = logging.getLogger(__name__)
-
-
-class SolveStats(Protocol):
-    """What a linear solver counts: its iterations per solve (none for a direct solve)."""
-
-    iterations: list[int]
-
-
-@runtime_checkable
-class LinearSolver(Protocol):
-    """What Newton asks of a linear solver (:class:`NewtonSolver`)."""
-
-    stats: SolveStats
-
-    def solve(self, K: sp.csr_matrix, r: np.ndarray, rtol: float | None = None,
-              x0: np.ndarray | None = None) -> np.ndarray:
-        """``x`` with ``K x = r`` for one tangent ``K`` (a fresh one each Newton iteration):
-        to the relative residual ``rtol`` (an iterative solver; None: its default) from the
-        guess ``x0``; ConvergenceError when it cannot."""
-        ...
-
-    def new_load_step(self) -> None:
-        """A Newton solve at a new load starts (a preconditioner may renew a part)."""
-        ...
-
-    def release(self) -> None:
-        """Free the work memory; a later solve rebuilds it."""
-        ...
 
 
 @dataclass
@@ -240,15 +209,3 @@ def _checked(x: np.ndarray) -> np.ndarray:
             "motions are suppressed and every region has a material"
         )
     return x
-
-
-def make_linear_solver(name: str = "pardiso", form=None) -> LinearSolver:
-    """``"pardiso"`` (direct, default) or ``"krylov"`` (GMRES preconditioned by blocks
-    built from ``form``'s spaces)."""
-    if name == "pardiso":
-        return PardisoSolver()
-    if name == "krylov":
-        from brainbulge.solver.krylov import BlockKrylovSolver
-
-        return BlockKrylovSolver.from_form(form)
-    raise InputError(f"unknown linear solver {name!r}; choose 'pardiso' or 'krylov'")

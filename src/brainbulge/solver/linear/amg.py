@@ -1,0 +1,206 @@
+"""Algebraic multigrid cycles for the blocks of the saddle-point preconditioner
+(:mod:`.krylov`): one smoothed-aggregation V-cycle (pyamg) with its hierarchy kept across
+Newton iterations (:class:`AMGCycle`), and a two-level cycle for a hierarchical P2
+displacement block (:class:`HierarchicalTwoLevel`, Taylor-Hood).
+
+pyamg builds the hierarchy; what is written here is what it does not do: pad the unknowns
+into node blocks, swap the finest level's matrix without a rebuild, and keep the smoothers'
+options when it does.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from brainbulge.errors import InputError
+from brainbulge.solver.linear.sparse_reuse import PatternGather
+from brainbulge.solver.linear.threaded_csr import threaded
+
+SMOOTHER_KEYS = ("presmoother", "postsmoother")
+
+
+def _smoother_setup(name: str):
+    from pyamg.relaxation import smoothing
+
+    return getattr(smoothing, f"setup_{name}")
+
+
+_SMOOTHER_SETUP = {
+    name: (lambda lvl, _n=name, **kw: _smoother_setup(_n)(lvl, **kw))
+    for name in ("gauss_seidel", "block_gauss_seidel", "jacobi", "block_jacobi")
+}
+
+
+class AMGCycle:
+    """One smoothed-aggregation V-cycle as a linear operator, with hierarchy reuse.
+
+    ``slot`` maps the unknowns into the (possibly padded) AMG index space; unused slots
+    carry identity rows decoupled from the rest.
+    """
+
+    def __init__(self, n_pad: int, slot: np.ndarray, blocksize: int, B: np.ndarray | None,
+                 options: dict) -> None:
+        self.n_pad = n_pad
+        self.slot = slot
+        self.empty = np.setdiff1d(np.arange(n_pad), slot)
+        self.blocksize = blocksize
+        self.B = B
+        self.options = options
+        self.ml = None
+        # the finest level of each new matrix, padded by a plan made once per pattern
+        self._padded_csr = PatternGather(lambda A: self._pad(A, 0.0), fill=self._fill)
+
+    @staticmethod
+    def _fill(A: sp.spmatrix) -> float:
+        """The diagonal of the identity rows at unused slots: the mean diagonal."""
+        diag = np.abs(A.diagonal())
+        return float(np.mean(diag[diag > 0])) if np.any(diag > 0) else 1.0
+
+    def _pad(self, A: sp.spmatrix, fill: float) -> sp.csr_matrix:
+        coo = A.tocoo()
+        rows = np.concatenate([self.slot[coo.row], self.empty])
+        cols = np.concatenate([self.slot[coo.col], self.empty])
+        vals = np.concatenate([coo.data, np.full(len(self.empty), fill)])
+        Ap = sp.csr_matrix((vals, (rows, cols)), shape=(self.n_pad, self.n_pad))
+        Ap.sum_duplicates()
+        Ap.sort_indices()
+        return Ap
+
+    def padded(self, A: sp.spmatrix) -> sp.spmatrix:
+        """``A`` in the AMG's index space (BSR node blocks when ``blocksize > 1``)."""
+        Ap = self._pad(A, self._fill(A))
+        if self.blocksize > 1:
+            return Ap.tobsr(blocksize=(self.blocksize, self.blocksize))
+        return Ap
+
+    def _options(self) -> dict:
+        opts = dict(
+            strength=("symmetric", {"theta": 0.0}),
+            smooth=("jacobi", {"omega": 4.0 / 3.0}),
+            improve_candidates=None,
+            max_coarse=500,
+            coarse_solver="splu",
+        )
+        opts.update({k: v for k, v in self.options.items() if k not in SMOOTHER_KEYS})
+        return opts
+
+    def _smoothers(self) -> tuple[tuple[str, dict], tuple[str, dict]]:
+        """A forward Gauss-Seidel sweep before the coarse correction, a backward one after
+        it: the V-cycle stays symmetric (the post-smoother is the pre-smoother's adjoint)
+        with half the sweeps of symmetric sweeps on both sides. On a 1.40M-tet fine-stage
+        system (1.08M unknowns): 78 GMRES iterations instead of 68, 55 s instead of 64 s."""
+        pre = self.options.get("presmoother", ("gauss_seidel", {"sweep": "forward"}))
+        post = self.options.get("postsmoother", ("gauss_seidel", {"sweep": "backward"}))
+        for name, _ in (pre, post):
+            if name not in _SMOOTHER_SETUP:
+                raise InputError(f"AMG smoother {name!r} not supported; choose one of "
+                                 f"{', '.join(_SMOOTHER_SETUP)}")
+        return pre, post
+
+    def setup(self, A: sp.spmatrix) -> None:
+        """Aggregate on node blocks (BSR), then smooth and transfer in CSR.
+
+        pyamg's block Gauss-Seidel on BSR was 2x slower per sweep than the scalar one on
+        CSR (3x3 blocks, 50k displacement DOFs), for about the same Krylov iterations.
+        """
+        import pyamg
+        from pyamg.relaxation.smoothing import change_smoothers
+
+        ml = pyamg.smoothed_aggregation_solver(self.padded(A), B=self.B, **self._options())
+        for lvl in ml.levels:  # the cycle's products on all cores
+            lvl.A = threaded(sp.csr_matrix(lvl.A))
+            for name in ("P", "R"):
+                if hasattr(lvl, name):
+                    setattr(lvl, name, threaded(sp.csr_matrix(getattr(lvl, name))))
+        pre, post = self._smoothers()
+        change_smoothers(ml, pre, post)
+        self.ml = ml
+
+    def update(self, A: sp.spmatrix) -> None:
+        """Keep the hierarchy, smooth with the new matrix on the finest level."""
+        lvl = self.ml.levels[0]
+        lvl.A = threaded(self._padded_csr(A))
+        if len(self.ml.levels) == 1:
+            return
+        # not ml.change_solve_matrix: it rebuilds the smoothers without their options
+        # (a forward sweep instead of the symmetric one: a non-symmetric preconditioner)
+        (pre, pre_kw), (post, post_kw) = self._smoothers()
+        lvl.presmoother = _SMOOTHER_SETUP[pre](lvl, **pre_kw)
+        lvl.postsmoother = _SMOOTHER_SETUP[post](lvl, **post_kw)
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        ml = self.ml
+        b = np.zeros(self.n_pad)
+        b[self.slot] = r
+        if len(ml.levels) == 1:
+            return ml.coarse_solver(ml.levels[0].A, b)[self.slot]
+        y = np.zeros(self.n_pad)
+        # one V-cycle from zero (pyamg's solve() would also form the final residual)
+        ml._MultilevelSolver__solve(0, y, b, "V")
+        return y[self.slot]
+
+    def describe(self) -> str:
+        ml = self.ml
+        return f"{len(ml.levels)} levels, operator complexity {ml.operator_complexity():.2f}"
+
+    def release(self) -> None:
+        """Drop the hierarchy and the padding plan (the next ``setup`` makes them again)."""
+        self.ml = None
+        self._padded_csr = PatternGather(self._padded_csr.transform, fill=self._fill)
+
+
+class HierarchicalTwoLevel:
+    """One symmetric two-level cycle for a hierarchical P2 displacement block (Taylor-Hood).
+
+    The P2 space splits into its P1 part (the vertex hat functions, whose block ``A_11`` is
+    the P1 stiffness) and the edge functions, whose block is well conditioned after
+    diagonal scaling, uniformly in ``h`` (the two-level hierarchical basis method: Bank,
+    Dupont and Yserentant 1988; Axelsson and Vassilevski). So a Gauss-Seidel sweep over the
+    whole block, the P1 AMG V-cycle on the vertex DOFs and a backward sweep make a
+    symmetric cycle::
+
+        x  = GS_forward(A, r)
+        x += I_1 AMG_11(r - A x)|_1
+        x  = GS_backward(A, r) from x
+
+    Written here because pyamg's aggregation needs a nonzero near-nullspace on every node,
+    and the rigid motions vanish on the hierarchical edge functions.
+    """
+
+    def __init__(self, linear: np.ndarray, amg: AMGCycle) -> None:
+        self.linear = np.flatnonzero(linear)
+        self.amg = amg
+        self.A: sp.csr_matrix | None = None
+        self._sub = PatternGather(lambda A: A[self.linear][:, self.linear])
+
+    @property
+    def ml(self):
+        return self.amg.ml
+
+    def setup(self, A: sp.spmatrix) -> None:
+        self.A = sp.csr_matrix(A)
+        self.amg.setup(self._sub(self.A))
+
+    def update(self, A: sp.spmatrix) -> None:
+        self.A = sp.csr_matrix(A)
+        self.amg.update(self._sub(self.A))
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        from pyamg.relaxation.relaxation import gauss_seidel
+
+        A = self.A
+        x = np.zeros_like(r)
+        gauss_seidel(A, x, r, iterations=1, sweep="forward")
+        d = r - threaded(A) @ x
+        x[self.linear] += self.amg(d[self.linear])
+        gauss_seidel(A, x, r, iterations=1, sweep="backward")
+        return x
+
+    def describe(self) -> str:
+        return f"P1 part: {self.amg.describe()}, Gauss-Seidel on the P2 block"
+
+    def release(self) -> None:
+        self.amg.release()
+        self.A = None
+        self._sub = PatternGather(self._sub.transform)
