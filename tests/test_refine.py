@@ -7,9 +7,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from brainbulge.geometry.brain.boundaries import boundary_faces
-from brainbulge.geometry.brain.quality import dihedral_angles_deg
+from brainbulge.geometry.brain.quality import dihedral_angles_deg, tet_volumes_mm3
 from brainbulge.geometry.brain.refine import move_onto_surface, refine_uniformly
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
 
 R = 10.0  # mm
 

@@ -117,6 +117,9 @@ class CraniectomyCase:
             ``coarse_tets = tets / 8**refine`` the coarse mesh of sequencing is the unrefined
             one: the meshes are nested and the coarse solution carries over exactly.
         name: label of the scenario.
+        extra: what a planner records about the case (``brainbulge plan``: the candidate
+            centre's index and side, its point on the skull, why a flap was refused); not
+            read by the simulation.
     """
 
     flap: str = "left"

@@ -29,7 +29,7 @@ active set.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import ngsolve as ngs
 
@@ -75,7 +75,6 @@ class HemidiskCase:
     edge_exclusion: float = 0.05
     rezone: bool = True
     name: str = "hemidisk"
-    extra: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.contact not in CONTACTS:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
+from brainbulge.geometry.brain.quality import tet_volumes_mm3
 
 if TYPE_CHECKING:
     from brainbulge.geometry.brain import MidSagittalPlane

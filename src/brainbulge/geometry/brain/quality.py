@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
+
+def tet_volumes_mm3(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Signed volumes (mm^3) of tetrahedra, positive for right-handed vertex order."""
+    p = nodes[tets]
+    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0],
+                     np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
+
 
 _OPPOSITE_FACES = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
+from brainbulge.geometry.brain.quality import tet_volumes_mm3
 
 #: The six edges of a tet as pairs of local vertex numbers.
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from brainbulge.geometry.brain.labels import CSF, TISSUES, TissueImage
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
+from brainbulge.geometry.brain.quality import tet_volumes_mm3
 
 LEFT, RIGHT = 0, 1
 SIDES = {LEFT: "left", RIGHT: "right"}
@@ -127,14 +127,6 @@ def tag_tissue(
 def _relative_error(tag: np.ndarray, vol: np.ndarray, target: np.ndarray) -> np.ndarray:
     mesh_vol = np.bincount(tag, weights=vol, minlength=len(target))
     return np.abs(mesh_vol - target)[target > 0] / target[target > 0]
-
-
-def _flip(tag: np.ndarray, cand: np.ndarray, loss: np.ndarray, new: np.ndarray,
-          vol: np.ndarray, amount: float) -> None:
-    """Give ``new`` labels to the least-loss candidates until ``amount`` (mm^3) has moved."""
-    order = np.argsort(loss, kind="stable")
-    n = min(len(cand), int(np.searchsorted(np.cumsum(vol[cand[order]]), amount)) + 1)
-    tag[cand[order[:n]]] = new[order[:n]]
 
 
 def _move(tag: np.ndarray, frac: np.ndarray, vol: np.ndarray, donor: int, receiver: int,

@@ -18,6 +18,7 @@ from skimage import measure
 
 from brainbulge.errors import MeshError
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
+from brainbulge.geometry.brain.quality import dihedral_angles_deg, tet_volumes_mm3
 
 log = logging.getLogger("brainbulge")
 
@@ -68,13 +69,6 @@ def _weld(verts: np.ndarray, faces: np.ndarray, tol_mm: float
     return centres[used], faces.reshape(-1, 3)
 
 
-def tet_volumes_mm3(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """Signed volumes (mm^3) of tetrahedra, positive for right-handed vertex order."""
-    p = nodes[tets]
-    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0],
-                     np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
-
-
 def mesh_intracranial_volume(envelope: IntracranialEnvelope, h_mm: float, optsteps: int = 3,
                              min_dihedral_deg: float = 10.0, max_attempts: int = 4
                              ) -> tuple[np.ndarray, np.ndarray]:
@@ -86,8 +80,6 @@ def mesh_intracranial_volume(envelope: IntracranialEnvelope, h_mm: float, optste
     ``min_dihedral_deg``, the mesh is redone with the element size and STL resolution nudged
     (up to ``max_attempts``) and the best mesh is kept.
     """
-    from brainbulge.geometry.brain.quality import dihedral_angles_deg
-
     spacing = float(np.linalg.norm(envelope.affine[:3, :3], axis=0).min())
     # STL from every second voxel: Netgen 6.2.2608 aborts the process on the every-voxel STL
     # of the template at h < 3 mm, and coarser STLs made overlapping surface meshes at h ~ 6 mm
@@ -125,8 +117,6 @@ def remove_surface_slivers(nodes: np.ndarray, tets: np.ndarray, min_dihedral_deg
     ``min_dihedral_deg`` (their removal only flattens the surface locally, by < 0.01 mm^3
     each); repeated while some are found, at most 5 times."""
     from brainbulge.geometry.brain.boundaries import boundary_faces
-    from brainbulge.geometry.brain.quality import dihedral_angles_deg
-
     for _ in range(5):
         bad = np.flatnonzero(dihedral_angles_deg(nodes, tets).min(axis=1) < min_dihedral_deg)
         if not len(bad):
