@@ -88,10 +88,33 @@ class NewtonSolver(MixedEquations):
             with nullcontext() if self.inexact else serial_openblas():
                 ok, its, norm = self._newton(x, curvature_below)
             if not ok:
-                self.failure_site = ramp.residual_site(self, x)
+                self.failure_site = self.residual_site(x)
             return ok, its, norm
         finally:
             self.with_curvature = True
+
+    def residual_site(self, x: ngs.BaseVector) -> np.ndarray | None:
+        """Deformed position ``X + u`` [length] of the vertex whose free displacement DOFs carry
+        the largest force residual ``|R_v|`` at ``x`` (where a failed Newton solve left its
+        imbalance: the place to look at, or to refine); None if ``R`` is not finite."""
+        from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
+
+        R = self.residual(x)
+        if self._vertex_dofs is None:
+            form = self.form
+            dofs = vertex_dofs(form.fes.components[0], form.mesh)
+            dofs = np.where(dofs >= 0, dofs + form.fes.Range(0).start, -1)
+            self._vertex_dofs = (dofs, vertex_coordinates(form.mesh))
+        dofs, X = self._vertex_dofs
+        free = np.zeros(len(R), dtype=bool)
+        free[self.free] = True
+        on = (dofs >= 0) & free[np.maximum(dofs, 0)]
+        force = np.linalg.norm(np.where(on, R[np.maximum(dofs, 0)], 0.0), axis=1)
+        if not np.all(np.isfinite(force)) or not force.any():
+            return None
+        v = int(np.argmax(force))
+        u = np.where(dofs[v] >= 0, x.FV().NumPy()[np.maximum(dofs[v], 0)], 0.0)
+        return X[v] + u
 
     def _newton(self, x: ngs.BaseVector, curvature_below: float) -> tuple[bool, int, float]:
         pcs = self.contact.contacts

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import ngsolve as ngs
 import numpy as np
@@ -24,10 +24,23 @@ from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
 from brainbulge.solver import restart
-from brainbulge.solver.options import Failure, Solution, StepRecord
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
 
-if TYPE_CHECKING:
-    from brainbulge.solver.newton import NewtonSolver
+
+class NewtonSolver(Protocol):
+    """What the ramp asks of a Newton solver (:class:`brainbulge.solver.newton.NewtonSolver`,
+    which runs its ramp through this module: the ramp sits below it)."""
+
+    form: MixedForm
+    opt: SolverOptions
+    tolerance: float
+    failure_site: np.ndarray | None
+
+    def newton(self, x: ngs.BaseVector, curvature_below: float = np.inf
+               ) -> tuple[bool, int, float]: ...
+
+    def max_penetration(self) -> float: ...
 
 log = logging.getLogger("brainbulge")
 
@@ -179,30 +192,6 @@ def check_feasible(solver: NewtonSolver) -> None:
             "clamped or against the rigid skull, a closed domain; open part of the "
             "boundary (a craniectomy opening)"
         )
-
-
-def residual_site(solver: NewtonSolver, x: ngs.BaseVector) -> np.ndarray | None:
-    """Deformed position ``X + u`` [length] of the vertex whose free displacement DOFs carry
-    the largest force residual ``|R_v|`` at ``x`` (where a failed Newton solve left its
-    imbalance: the place to look at, or to refine); None if ``R`` is not finite."""
-    from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
-
-    R = solver.residual(x)
-    if solver._vertex_dofs is None:
-        form = solver.form
-        dofs = vertex_dofs(form.fes.components[0], form.mesh)
-        dofs = np.where(dofs >= 0, dofs + form.fes.Range(0).start, -1)
-        solver._vertex_dofs = (dofs, vertex_coordinates(form.mesh))
-    dofs, X = solver._vertex_dofs
-    free = np.zeros(len(R), dtype=bool)
-    free[solver.free] = True
-    on = (dofs >= 0) & free[np.maximum(dofs, 0)]
-    force = np.linalg.norm(np.where(on, R[np.maximum(dofs, 0)], 0.0), axis=1)
-    if not np.all(np.isfinite(force)) or not force.any():
-        return None
-    v = int(np.argmax(force))
-    u = np.where(dofs[v] >= 0, x.FV().NumPy()[np.maximum(dofs[v], 0)], 0.0)
-    return X[v] + u
 
 
 def finished(solver: NewtonSolver, sol: Solution, start: float) -> Solution:
