@@ -25,6 +25,7 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.brain import BrainMesh, to_ngsolve
 from brainbulge.geometry.brain.boundaries import UNILATERAL_DIAMETER_MM, SuperiorBand
 from brainbulge.geometry.brain.defaults import (
+    COARSE_TETS,
     FIXATIONS,
     LARGE_TETS,
     SUPERIOR_ELEVATION_DEG,
@@ -46,8 +47,9 @@ def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None 
     argument given (not None) is kept as it is.
 
     From :data:`LARGE_TETS` up: Netgen at ``tets / 8``, refined once (``refine = 1``), mesh
-    sequencing from that unrefined, nested mesh (``coarse_tets = tets // 8**refine``: no
-    second Netgen run) and GMRES with AMG blocks (``krylov``); below it: one Netgen mesh,
+    sequencing from a separate Netgen mesh of :data:`COARSE_TETS` tets (the nested, unrefined
+    mesh, ``coarse_tets = tets // 8**refine``, is used when asked for: from its state the fine
+    stage stalled at 1.40M tets) and GMRES with AMG blocks (``krylov``); below it: one Netgen mesh,
     no sequencing, PARDISO. ``coarse_tets = 0`` turns sequencing off. A mesh read from a
     file (``mesh_given``) is not refined or sequenced unless asked; sequencing needs MINI.
     """
@@ -57,7 +59,7 @@ def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None 
     if linear_solver is None:
         linear_solver = "krylov" if large else "pardiso"
     if coarse_tets is None and large and refine > 0 and element == "mini":
-        coarse_tets = tets // 8**refine
+        coarse_tets = COARSE_TETS
     return refine, coarse_tets or None, linear_solver
 
 
