@@ -22,3 +22,13 @@ def serial_openblas() -> AbstractContextManager:
     from threadpoolctl import ThreadpoolController
 
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
+
+
+def available_cores() -> int:
+    """The cores this process may use (its CPU affinity)."""
+    import os
+
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)

@@ -52,7 +52,7 @@ import scipy.sparse as sp
 
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
-from brainbulge.solver.linear.threaded_csr import threads
+from brainbulge.solver.threads import available_cores
 
 log = logging.getLogger(__name__)
 # Numba's compiler logs every pass at DEBUG: tens of thousands of lines in a run's log
@@ -341,7 +341,7 @@ class MiniTangent:
             [(np.arange(3)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 12),
              self.zoff[:, None] + self.verts], axis=1)
         self._pattern = _pattern(self.ext_dofs, self.ndof)
-        numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
+        numba.set_num_threads(min(available_cores(), numba.config.NUMBA_NUM_THREADS))
         log.info("closed-form MINI tangent: %d elements in %d colours, pattern %d non-zeros "
                  "(%.1f s)", ne, n_col, self._pattern.nnz, time.perf_counter() - t0)
 

@@ -15,7 +15,6 @@ import scipy.sparse as sp
 
 from brainbulge.errors import InputError
 from brainbulge.solver.linear.sparse_reuse import PatternGather
-from brainbulge.solver.linear.threaded_csr import threaded
 
 SMOOTHER_KEYS = ("presmoother", "postsmoother")
 
@@ -108,11 +107,11 @@ class AMGCycle:
         from pyamg.relaxation.smoothing import change_smoothers
 
         ml = pyamg.smoothed_aggregation_solver(self.padded(A), B=self.B, **self._options())
-        for lvl in ml.levels:  # the cycle's products on all cores
-            lvl.A = threaded(sp.csr_matrix(lvl.A))
+        for lvl in ml.levels:  # CSR products in the cycle
+            lvl.A = sp.csr_matrix(lvl.A)
             for name in ("P", "R"):
                 if hasattr(lvl, name):
-                    setattr(lvl, name, threaded(sp.csr_matrix(getattr(lvl, name))))
+                    setattr(lvl, name, sp.csr_matrix(getattr(lvl, name)))
         pre, post = self._smoothers()
         change_smoothers(ml, pre, post)
         self.ml = ml
@@ -120,7 +119,7 @@ class AMGCycle:
     def update(self, A: sp.spmatrix) -> None:
         """Keep the hierarchy, smooth with the new matrix on the finest level."""
         lvl = self.ml.levels[0]
-        lvl.A = threaded(self._padded_csr(A))
+        lvl.A = self._padded_csr(A)
         if len(self.ml.levels) == 1:
             return
         # not ml.change_solve_matrix: it rebuilds the smoothers without their options
@@ -192,7 +191,7 @@ class HierarchicalTwoLevel:
         A = self.A
         x = np.zeros_like(r)
         gauss_seidel(A, x, r, iterations=1, sweep="forward")
-        d = r - threaded(A) @ x
+        d = r - A @ x
         x[self.linear] += self.amg(d[self.linear])
         gauss_seidel(A, x, r, iterations=1, sweep="backward")
         return x

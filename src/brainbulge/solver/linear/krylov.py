@@ -51,7 +51,6 @@ from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.solver.linear.amg import AMGCycle, HierarchicalTwoLevel
 from brainbulge.solver.linear.layout import DisplacementLayout, displacement_layout, free_dofs
 from brainbulge.solver.linear.sparse_reuse import PatternGather
-from brainbulge.solver.linear.threaded_csr import threaded
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -257,7 +256,6 @@ class BlockKrylovSolver:
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
         A, Bt, C = self._update(K)
-        K, Bt = threaded(K), threaded(Bt)  # Krylov and block products on all cores
         with serial_openblas():  # small BLAS-2 work: threads cost more than they give
             x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0)
         if self._ref_iterations is None:
