@@ -23,7 +23,7 @@ from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.options import DIVERGENCE_ADVICE, Solution
 from brainbulge.solver.sequencing import interpolate_state, solve_sequenced
-from test_point_contact import A, _capped_ball
+from contact_cases import A, _capped_ball
 
 OPTIONS = SolverOptions(steps=2)
 
