@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_brain_metrics import box_mesh
 
 from brainbulge.geometry.brain import MidSagittalPlane
 from brainbulge.results.brain_metrics import (
@@ -22,6 +21,7 @@ from brainbulge.results.brain_metrics import (
     monro_midline_shift_mm,
 )
 from brainbulge.results.summary import constraint_statistics
+from simple_meshes import box_mesh
 
 PLANE = MidSagittalPlane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
 

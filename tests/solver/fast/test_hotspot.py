@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_point_contact import A, _capped_ball
 
 from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 from brainbulge.solver import SolverOptions, mixed
 from brainbulge.solver.hotspot import HotspotRelaxation, _LocalProblem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
+from contact_cases import A, _capped_ball
 
 
 @pytest.fixture(scope="module", params=["split", "one expression"])
