@@ -40,3 +40,12 @@ def box2d() -> ngs.Mesh:
 @pytest.fixture(scope="session")
 def box3d() -> ngs.Mesh:
     return unit_box_mesh(3)
+
+
+@pytest.fixture(scope="module")
+def swollen():
+    """Form, Newton solver and the tangent/right-hand side of a Newton step at a swollen
+    state of the soft inclusion (:func:`inclusion_cases.swollen_state`), once per module."""
+    from inclusion_cases import swollen_state
+
+    return swollen_state()

@@ -21,7 +21,7 @@ from brainbulge.results.brain_metrics import (
     monro_midline_shift_mm,
 )
 from brainbulge.results.summary import constraint_statistics
-from test_brain_metrics import box_mesh
+from simple_meshes import box_mesh
 
 PLANE = MidSagittalPlane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
 

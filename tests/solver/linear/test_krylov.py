@@ -12,50 +12,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401 - sp.linalg
 
 from brainbulge.errors import ConvergenceError
-from brainbulge.geometry.inclusion import inclusion_mesh
-from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.linear.direct import PardisoSolver
 from brainbulge.solver.linear.krylov import BlockKrylovSolver
 from brainbulge.solver.linear.layout import displacement_layout, free_dofs
+from inclusion_cases import STIFF, _inclusion_problem
 
-SOFT = MooneyRivlin(0.03, 33.3)
-STIFF = MooneyRivlin(0.28, 333.0)
 # several AMG levels even on this small mesh
 AMG = {"max_coarse": 30}
-
-
-def _inclusion_problem() -> Problem:
-    """A soft swelling sphere (Js 1.3) in a stiff ball, octant with symmetry planes."""
-    mesh = inclusion_mesh(3, A=0.3, h=0.3, h_inclusion=0.15)
-    return Problem(
-        mesh,
-        {"inclusion": SOFT, "matrix": STIFF},
-        {"inclusion": 1.3},
-        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
-    )
-
-
-@pytest.fixture(scope="module")
-def swollen():
-    """Form, Newton solver and the tangent/right-hand side of a Newton step at a swollen
-    state (load 0.7 of Js = 1.3 converged, then the load raised to 1)."""
-    problem = _inclusion_problem()
-    form = MixedForm(problem, element="mini")
-    ns = NewtonSolver(form, SolverOptions(tolerance=1e-10))
-    for load in (0.4, 0.7):
-        form.set_load(load)
-        ok, _, _ = ns.newton(form.gfu.vec)
-        assert ok
-    x = form.gfu.vec
-    K1 = ns.tangent(x)
-    form.set_load(1.0)
-    r = ns.residual(x)
-    rhs = x.CreateVector()
-    rhs.FV().NumPy()[:] = r
-    rhs.data += form.a.harmonic_extension_trans * rhs
-    return form, ns, K1, rhs.FV().NumPy()[ns.free].copy()
 
 
 def _direct(K, r):
@@ -271,145 +236,6 @@ def test_extra_constraint_rows_of_an_active_set(swollen) -> None:
     assert solver.stats.setups == 1
 
 
-def test_forcing_terms_follow_the_residual_ratio() -> None:
-    """Eisenstat-Walker choice 2: tight when Newton converges fast, capped, safeguarded,
-    and never tighter than the Newton tolerance needs."""
-    from brainbulge.solver.inexact import ETA_MAX, ETA_MIN, forcing_term
-
-    assert forcing_term(ETA_MAX, 0.9, 1.0, 1e-9) == ETA_MAX  # slow progress: loose
-    assert forcing_term(ETA_MAX, 1e-3, 1e-3, 1e-12) == pytest.approx(0.9e-6)
-    # the cap wins over the floor 0.1 tol / |R| (GMRES's norm is not Newton's)
-    assert forcing_term(ETA_MAX, 1e-3, 1e-8, 1e-9) == pytest.approx(min(1e-2, ETA_MAX))
-    assert forcing_term(0.5, 1e-6, 1.0, 1e-20) == pytest.approx(min(0.9 * 0.25, ETA_MAX))
-    assert forcing_term(ETA_MAX, 0.0, 1e-30, 0.0) == ETA_MIN
-
-
-@pytest.mark.parametrize("element", ["mini", "taylor-hood"])
-def test_inexact_newton_reaches_the_direct_solution(element: str) -> None:
-    """Newton with Krylov at Eisenstat-Walker tolerances converges to the same state as
-    Newton with the direct solver, in about as many iterations."""
-    problem = _inclusion_problem()
-    sols = {}
-    for linear in ("pardiso", "krylov"):
-        form = MixedForm(problem, element=element)
-        sol = NewtonSolver(form, SolverOptions(steps=2, linear_solver=linear)).solve()
-        assert sol.converged
-        sols[linear] = (form.gfu.vec.FV().NumPy().copy(), sol.newton_iterations)
-    (x_d, it_d), (x_k, it_k) = sols["pardiso"], sols["krylov"]
-    free = np.abs(x_d) > 0
-    assert np.max(np.abs(x_k - x_d)) <= 1e-6 * np.max(np.abs(x_d[free]))
-    assert it_k <= it_d + 3
-
-
-class _Wrapped:
-    """A PARDISO solver object passed through (tests replace one method)."""
-
-    def __init__(self, inner) -> None:
-        object.__setattr__(self, "inner", inner)
-
-    def __getattr__(self, name):
-        return getattr(self.inner, name)
-
-    def __setattr__(self, name, value) -> None:
-        setattr(self.inner, name, value)
-
-
-def test_direct_solver_redoes_a_stale_analysis_before_falling_back_to_lu(swollen) -> None:
-    """A numeric factorisation on a reused analysis keeps the scaling and matching PARDISO
-    computed from the values analysed then; when that solve misses 1e-6 it is redone once
-    with a fresh analysis (2D alpha 80 / beta 30 fold: 4e-3 -> 1e-10; h 0.04 headline: 8 LU
-    fallbacks -> 0), and only a miss after that counts for the LU fallback."""
-    _, _, K, r = swollen
-
-    class Stale(_Wrapped):  # factors on a reused analysis give 3x too large solutions
-        def factorize(self, A):
-            object.__setattr__(self, "stale", self.inner._analysed)
-            self.inner.factorize(A)
-
-        def solve(self, A, b):
-            return (3.0 if self.stale else 1.0) * self.inner.solve(A, b)
-
-    solver = PardisoSolver()
-    solver._symmetric = Stale(solver._symmetric)
-    solver.solve(K, r)
-    assert solver._symmetric.reanalyses == 0
-    K2 = (3.0 * K).tocsr()  # the same pattern, other values
-    x = solver.solve(K2, r)
-    assert np.linalg.norm(K2 @ x - r) <= 1e-9 * np.linalg.norm(r)
-    assert solver._symmetric.reanalyses == 1 and solver.lu_solves == 0
-
-
-def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -> None:
-    """A symmetric-mode result that misses 1e-6 (as on contact saddle points of the 111k-tet
-    brain) is replaced by unsymmetric LU, for the rest of the run after two misses in a row;
-    a matrix neither mode solves raises."""
-    _, _, K, r = swollen
-
-    class Broken(_Wrapped):  # a factorisation whose solutions are 3x too large
-        def solve(self, A, b):
-            return 3.0 * self.inner.solve(A, b)
-
-    solver = PardisoSolver()
-    good = solver._symmetric
-    solver._symmetric = Broken(good)
-    x = solver.solve(K, r)
-    assert np.linalg.norm(K @ x - r) <= 1e-9 * np.linalg.norm(r)
-    assert solver.lu_solves == 1 and not solver._lu_only  # one miss: LU for that matrix
-    solver._symmetric = good
-    solver.solve(K, r)
-    assert solver.lu_solves == 1  # the symmetric mode again
-    solver._symmetric = Broken(good)
-    solver.solve(K, r)
-    solver.solve(K, r)
-    assert solver._lu_only and solver.lu_solves == 3  # two misses in a row: LU from now on
-    solver._symmetric = good
-    solver.solve(K, r)
-    assert solver.lu_solves == 4
-    solver._general = Broken(solver._general)
-    with pytest.raises(ConvergenceError, match="lost accuracy"):
-        solver.solve(K, r)
-
-
-def test_direct_solver_analyses_a_sparsity_pattern_once(swollen, monkeypatch) -> None:
-    """Tangents on a known pattern (or a subset of it: a smaller active set, dropped zeros)
-    are factorised without a new symbolic analysis (PARDISO phase 22, not 12), and solved
-    as accurately as with one; a new nonzero position brings a new analysis."""
-    _, _, K, r = swollen
-    solver = PardisoSolver()
-    phases: list[int] = []
-    inner = solver._symmetric
-    original = type(inner)._call_pardiso
-
-    def spy(self, A, b):
-        phases.append(self.phase)
-        return original(self, A, b)
-
-    monkeypatch.setattr(type(inner), "_call_pardiso", spy)
-    K = K.tocsr()
-    x = solver.solve(K, r)
-    assert 12 in phases
-    K2 = K.copy()
-    K2.data = K2.data * (1 + 0.1 * np.cos(np.arange(K2.nnz)))  # new values, same pattern
-    K2 = 0.5 * (K2 + K2.T)
-    C = K2.tocoo()
-    pick = np.flatnonzero(C.row != C.col)[:6]  # six pairs dropped: a subset of the pattern
-    drop = sp.coo_matrix((np.ones(6), (C.row[pick], C.col[pick])), shape=K2.shape)
-    K2 = (K2 - K2.multiply((drop + drop.T) > 0)).tocsr()
-    K2.eliminate_zeros()
-    assert K2.nnz < K.nnz
-    phases.clear()
-    x2 = solver.solve(K2, r)
-    assert 22 in phases and 12 not in phases
-    assert np.linalg.norm(K2 @ x2 - r) <= 1e-9 * np.linalg.norm(r)
-    assert np.linalg.norm(x2 - x) > 1e-6 * np.linalg.norm(x)  # another matrix, solved anew
-    n = K.shape[0]
-    K3 = (K + sp.coo_matrix(([1e-3, 1e-3], ([0, n - 1], [n - 1, 0])), shape=K.shape)).tocsr()
-    phases.clear()
-    x3 = solver.solve(K3, r)
-    assert 12 in phases  # the new entries (0, n-1) need a new analysis
-    assert np.linalg.norm(K3 @ x3 - r) <= 1e-9 * np.linalg.norm(r)
-
-
 def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:
     """``K + r B^T B`` with ``b - r B^T c`` (what both linear solvers get) solves the plain
     saddle point ``[[K, -B^T], [-B, 0]] [dx, dlam] = [b, c]`` exactly."""
@@ -497,45 +323,3 @@ def test_a_guess_from_a_smaller_active_set_is_projected(swollen) -> None:
     assert np.abs(second.N.T @ second.project(y1)).max() < 1e-12 * np.abs(y1).max()
 
 
-def test_a_failed_line_search_on_a_loose_krylov_direction_retries_tighter(monkeypatch) -> None:
-    """With a Krylov tolerance far too loose (0.5), a direction can be so poor that the line
-    search finds no step; the solver then solves it again 100x tighter instead of giving up
-    (without the retry this load step fails twice and is cut: 3 Newton solves, 18 its)."""
-    from brainbulge.solver import inexact, newton
-
-    for module in (newton, inexact):  # the loosest tolerance: at each solve, and the cap
-        monkeypatch.setattr(module, "ETA_MAX", 0.5)
-    form = MixedForm(_inclusion_problem(), element="mini")
-    ns = NewtonSolver(form, SolverOptions(steps=1, linear_solver="krylov"))
-    sol = ns.solve()
-    assert sol.converged
-    assert ns.tightened_solves >= 1
-    assert len(ns.history) == 1  # one Newton solve: no load-step cut
-
-
-def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None:
-    """With scaling and weighted matching the symmetric-indefinite mode solves the hemidisk's
-    pressure/contact saddle point (h 0.04, corner 0.004) to the refinement tolerance; with
-    MKL's defaults it left 99 perturbed pivots and fell back to LU for the whole run. (With
-    the rim refinement at 0.004 the first two tangents of the second load step still miss
-    1e-6 and LU takes over, as designed.)"""
-    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.04,
-                        corner_mesh_size=0.004, rim_mesh_size=0.04)  # (no rim refinement)
-    solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
-    sol = solver.solve()
-    assert sol.converged
-    assert solver.linear.lu_solves == 0
-
-
-def test_both_linear_solvers_offer_what_newton_calls() -> None:
-    """PARDISO and the Krylov solver both implement :class:`LinearSolver`: the solve with a
-    tolerance and a guess, the new-load-step hook, release and iteration counts."""
-    from brainbulge.solver.linear import LinearSolver, make_linear_solver
-
-    form = MixedForm(_inclusion_problem(), element="mini")
-    for name in ("pardiso", "krylov"):
-        linear = make_linear_solver(name, form)
-        assert isinstance(linear, LinearSolver)
-        assert isinstance(linear.stats.iterations, list)

@@ -1,5 +1,5 @@
 """Mesh sequencing (:mod:`brainbulge.solver.remesh.sequencing`) on the capped ball of
-test_point_contact: a swelling sphere in an incompressible ball octant sliding in a rigid
+contact_cases: a swelling sphere in an incompressible ball octant sliding in a rigid
 spherical skull with polar openings, meshed twice (h = 0.3 and 0.15).
 
 - the carried-over state is exact where it can be: affine ``u`` and per-zone affine ``p`` at
@@ -21,17 +21,11 @@ from brainbulge.solver import SolverOptions
 from brainbulge.solver import ramp as solver_ramp
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
-from brainbulge.solver.options import DIVERGENCE_ADVICE, Solution
+from brainbulge.solver.options import Solution
 from brainbulge.solver.remesh.sequencing import interpolate_state, solve_sequenced
-from test_point_contact import A, _capped_ball
+from contact_cases import _coords, _forms
 
 OPTIONS = SolverOptions(steps=2)
-
-
-def _forms(element: str = "mini") -> tuple[MixedForm, MixedForm]:
-    coarse = MixedForm(_capped_ball(h=0.3, h_inclusion=A / 2, cap_deg=35)[1], element=element)
-    fine = MixedForm(_capped_ball(h=0.15, h_inclusion=A / 3, cap_deg=35)[1], element=element)
-    return coarse, fine
 
 
 def _vertex_u(form: MixedForm) -> np.ndarray:
@@ -44,10 +38,6 @@ def _zone_vertices(mesh: ngs.Mesh, zone: str) -> np.ndarray:
     mask = mesh.Materials(zone).Mask()
     return np.unique([v.nr for el in mesh.Elements(ngs.VOL) if mask[el.index]
                       for v in el.vertices])
-
-
-def _coords(mesh: ngs.Mesh) -> np.ndarray:
-    return np.array([v.point for v in mesh.vertices])
 
 
 @pytest.fixture(scope="module")
@@ -174,27 +164,6 @@ def test_equilibrate_restores_the_state_when_newton_fails() -> None:
     assert np.array_equal(fine.point_contacts[0].lam, lam0)
 
 
-def test_tangent_with_contact_curvature_matches_the_plain_scipy_construction() -> None:
-    """The tangent built by plans (curvature added on the pattern, free part gathered) is
-    the one SciPy builds, ``(K - sum_c P^T H P)[free][:, free]``, at a state with pressed
-    points, and stays so for a second tangent (the plans reused)."""
-    import scipy.sparse as sp
-
-    coarse, _ = _forms()
-    solver = NewtonSolver(coarse, OPTIONS)
-    assert solver.solve().converged
-    x = coarse.gfu.vec
-    pc = coarse.point_contacts[0]
-    assert (pc.lam > 0).sum() > 10
-    for _ in range(2):
-        K = solver.tangent(x)
-        mat = coarse.a.mat
-        ref = sp.csr_matrix(mat.CSR(), shape=(mat.height, mat.width)) - pc.curvature()
-        ref = ref[solver.free][:, solver.free]
-        assert pc.curvature().nnz > 0
-        assert abs(K - ref).max() <= 1e-12 * abs(ref).max()
-
-
 def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp,
                                                                            monkeypatch) -> None:
     """From a carried-over state the tangent leaves the contact curvature out while the
@@ -224,30 +193,6 @@ def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp,
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
 
 
-
-def test_vertex_fields_give_the_vertex_values():
-    """Vertex DOFs set to ``G X + c`` (bubbles zero): the vertex fields give them at every
-    vertex (each vertex's value is the mean over the corners of its elements, so a corner
-    matched to the wrong vertex shows), and the cells their regions."""
-    from brainbulge.results.export import vertex_fields
-
-    form, _ = _forms()
-    G = np.array([[0.02, 0.01, -0.03], [0.0, -0.01, 0.02], [0.01, 0.0, 0.03]])
-    c = np.array([0.1, -0.2, 0.05])
-    u_exact = _coords(form.mesh) @ G.T + c
-    V = form.fes.components[0]
-    uvec = form.u.vec.FV().NumPy()
-    uvec[:] = 0.0
-    for v in range(form.mesh.nv):
-        uvec[list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))] = u_exact[v]
-    vf = vertex_fields(form, np.zeros(3))
-    np.testing.assert_allclose(vf.point_data["u"], u_exact, atol=1e-13)
-    np.testing.assert_allclose(vf.point_data["u_magnitude"], np.linalg.norm(u_exact, axis=1),
-                               atol=1e-13)
-    regions = [el.index for el in form.mesh.Elements(ngs.VOL)]
-    np.testing.assert_array_equal(vf.cell_data["region"], regions)
-
-
 def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     """The coarse state is only a start: its Newton stops at COARSE_TOLERANCE, the fine
     mesh's at the requested tolerance."""
@@ -270,42 +215,3 @@ def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     assert hist_f[-1][-1] <= OPTIONS.tolerance
 
 
-def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
-    """At a converged state, a displacement kick at one free vertex makes the force
-    residual largest there: ``residual_site`` returns that vertex's deformed position."""
-    coarse, _ = _forms()
-    solver = NewtonSolver(coarse, OPTIONS)
-    assert solver.solve().converged
-    V = coarse.fes.components[0]
-    X = _coords(coarse.mesh)
-    free = np.zeros(coarse.fes.ndof, dtype=bool)
-    free[solver.free] = True
-    # a free interior vertex, far from the points of the contact boundary
-    inner = [v for v in range(coarse.mesh.nv)
-             if all(free[d] for d in V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
-             and np.min(np.linalg.norm(coarse.point_contacts[0].X - X[v], axis=1)) > 0.2]
-    v = inner[len(inner) // 2]
-    dofs = list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
-    x = coarse.gfu.vec
-    x.FV().NumPy()[dofs] += 0.02 * coarse.h
-    site = solver.residual_site(x)
-    np.testing.assert_allclose(site, X[v] + x.FV().NumPy()[dofs], atol=1e-12)
-
-
-def test_a_diverged_ramp_says_where_the_force_was_unbalanced() -> None:
-    """Newton limited to one iteration per attempt cannot take a load step: the message
-    and the Solution's failure name the load, the smallest step tried and the deformed
-    position of the largest unbalanced force; a caller may give its own advice."""
-    coarse, _ = _forms()
-    sol = NewtonSolver(coarse, SolverOptions(steps=1, max_iterations=1, min_step=0.3)).solve()
-    assert not sol.converged and sol.load == 0.0 and sol.swelling_reached == 1.0
-    failure = sol.failure
-    assert failure is not None and failure.kept == 0.0
-    assert failure.step == pytest.approx(0.5) and failure.load == pytest.approx(0.5)
-    assert sol.failure_site is failure.site and np.all(np.isfinite(failure.site))
-    assert "largest unbalanced force was at (" in sol.message
-    where = ", ".join(f"{c:.4g}" for c in sol.failure_site)
-    assert where in sol.message
-    assert sol.message.endswith(DIVERGENCE_ADVICE)
-    assert sol.describe("Look there.").endswith("is kept; the last attempt's largest "
-                                                f"unbalanced force was at ({where}). Look there.")

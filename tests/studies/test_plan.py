@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import csv
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -37,9 +36,7 @@ from brainbulge.geometry.brain.flap_fit import (
 from brainbulge.model.brain import CraniectomyCase
 from brainbulge.results.plan_report import COLUMNS, pareto_front, recommend
 from brainbulge.studies.plan import plan_cases, run_plan
-
-sys.path.insert(0, str(Path(__file__).parent))
-from toy_brain import toy_labels  # noqa: E402
+from toy_brain import toy_labels
 
 BAND = SuperiorBand()
 #: the toy head is 12 x 10 x 9 cm: flaps of 7-8 cm are its 12-14 cm

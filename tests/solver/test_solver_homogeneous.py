@@ -194,7 +194,8 @@ def test_energy_compiled_to_machine_code_gives_the_same_residual_and_tangent() -
 
 
 @pytest.mark.parametrize("element,native", [("taylor-hood", False), ("mini", False),
-                                            pytest.param("mini", True, marks=needs_compiler)])
+                                            pytest.param("mini", True,
+                                                         marks=[needs_compiler, pytest.mark.slow])])
 def test_energy_split_per_pressure_zone_gives_the_same_residual_and_tangent(
         element, native, monkeypatch) -> None:
     """``sum_z int_z psi + p_z (J - Js)`` (faster to differentiate) is the one-expression

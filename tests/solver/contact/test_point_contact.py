@@ -16,18 +16,14 @@ import numpy as np
 import pytest
 
 from brainbulge.errors import InfeasibleError
-from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.geometry.sphere_skull import SphericalSkull
-from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.model.problem import Contact
 from brainbulge.solver import SolverOptions
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from conftest import unit_box_mesh
-
-GRAY = MooneyRivlin(0.28, 333.0)
-A, JS = 0.2, 1.3
+from contact_cases import GRAY, JS, A, _capped_ball
 
 
 @dataclass
@@ -106,21 +102,6 @@ def test_point_contact_derivatives(element: str, obstacle, spread: float) -> Non
     assert np.linalg.norm(dR - Kc @ dx) < 1e-5 * scale
     dg = (weighted_gap(x0 + eps * dx) - weighted_gap(x0 - eps * dx)) / (2 * eps)
     assert np.linalg.norm(dg - B @ dx) < 1e-6 * np.linalg.norm(dg)
-
-
-def _capped_ball(h: float, h_inclusion: float, cap_deg: float):
-    """Ball octant with a swelling inclusion, sliding in a spherical skull with polar caps."""
-    mesh = inclusion_mesh(3, A=A, h=h, h_inclusion=h_inclusion)
-    skull = SphericalSkull(R=1.0, cap_deg=cap_deg, thickness=0.2, edge_radius=0.05,
-                           both_poles=True)
-    problem = Problem(
-        mesh,
-        {"inclusion": GRAY, "matrix": GRAY},
-        {"inclusion": JS},
-        clamped_components={0: "sym_x", 1: "sym_y", 2: "sym_z"},
-        contacts=[Contact("outer", skull)],
-    )
-    return mesh, problem
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ from brainbulge.solver import SolverOptions, mixed
 from brainbulge.solver.fast.hotspot import HotspotRelaxation, _LocalProblem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
-from test_point_contact import A, _capped_ball
+from contact_cases import A, _capped_ball
 
 
 @pytest.fixture(scope="module", params=["split", "one expression"])

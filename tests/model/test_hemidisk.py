@@ -92,6 +92,7 @@ def test_rim_refinement_puts_small_elements_on_the_exclusion_circles() -> None:
     assert ngs.Integrate(1, rim) == pytest.approx(math.pi / 2, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_extremes_converge_with_rim_refinement() -> None:
     """Mesh convergence of the ``max_*``/``min_*`` keys (docs/verification.md): the default
     mesh (rim size h/10) against one with corners and rims twice as fine agree within 2 % in

@@ -213,6 +213,7 @@ def test_save_load_roundtrip(synthetic_mesh, tmp_path) -> None:
     assert back.flap_area_cm2("frontal") == pytest.approx(synthetic_mesh.flap_area_cm2("frontal"))
 
 
+@pytest.mark.slow
 def test_cli_mesh_on_user_labels(tmp_path, capsys) -> None:
     labels, affine = synthetic_labels(seed=5)
     path = tmp_path / "aseg.nii.gz"
@@ -281,6 +282,7 @@ def test_too_coarse_a_mesh_to_refine_is_refused(synthetic_image) -> None:
         build_brain_mesh(synthetic_image, target_tets=30_000, refinements=2)
 
 
+@pytest.mark.slow
 def test_cli_mesh_refine(tmp_path, capsys) -> None:
     """``brainbulge mesh --refine 1``: eight times Netgen's tets, recorded in mesh.json."""
     import json

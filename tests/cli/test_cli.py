@@ -16,7 +16,7 @@ import pytest
 
 from brainbulge.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 BAD = [
     (["hemidisk", "--alpha", "0"], "alpha"),

@@ -96,6 +96,7 @@ def test_contact_and_constraint(shifts) -> None:
         assert abs(s["integral_J_minus_Js"]) < 1e-6 * s["brain_volume_ml"] * 1000
 
 
+@pytest.mark.slow
 def test_a_looser_tolerance_stops_sooner_at_the_same_state(symmetric_brain, shifts,
                                                           tmp_path) -> None:
     """``tolerance`` is Newton's stopping test at full load: fewer iterations, a residual
@@ -158,6 +159,7 @@ def test_cli_on_the_template(tmp_path) -> None:
     _check_outputs(out)
 
 
+@pytest.mark.slow
 def test_intact_skull_is_infeasible(symmetric_brain, tmp_path) -> None:
     from brainbulge.errors import InfeasibleError
 
@@ -254,6 +256,7 @@ def test_study_resume_refuses_a_mesh_built_for_other_options(tmp_path) -> None:
         prepare_study_mesh(tmp_path, {**common, "refine": 1})
 
 
+@pytest.mark.slow
 def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_path,
                                                          monkeypatch) -> None:
     """A run stopped in its second load step leaves ``restart.npz``; run again into the same
@@ -285,6 +288,7 @@ def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_pa
     assert not (tmp_path / "restart.npz").exists()
 
 
+@pytest.mark.slow
 def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_path) -> None:
     """A coarse mesh of the same labels solved first: the fine mesh's Newton, started at
     full load from its solution, converges in one step to the ramp's state up to the

@@ -1,0 +1,58 @@
+"""Inexact Newton (:mod:`brainbulge.solver.inexact`): Eisenstat-Walker forcing terms, the
+Krylov-driven Newton against the direct one, the tightened retry of a poor direction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from inclusion_cases import _inclusion_problem
+
+
+def test_forcing_terms_follow_the_residual_ratio() -> None:
+    """Eisenstat-Walker choice 2: tight when Newton converges fast, capped, safeguarded,
+    and never tighter than the Newton tolerance needs."""
+    from brainbulge.solver.inexact import ETA_MAX, ETA_MIN, forcing_term
+
+    assert forcing_term(ETA_MAX, 0.9, 1.0, 1e-9) == ETA_MAX  # slow progress: loose
+    assert forcing_term(ETA_MAX, 1e-3, 1e-3, 1e-12) == pytest.approx(0.9e-6)
+    # the cap wins over the floor 0.1 tol / |R| (GMRES's norm is not Newton's)
+    assert forcing_term(ETA_MAX, 1e-3, 1e-8, 1e-9) == pytest.approx(min(1e-2, ETA_MAX))
+    assert forcing_term(0.5, 1e-6, 1.0, 1e-20) == pytest.approx(min(0.9 * 0.25, ETA_MAX))
+    assert forcing_term(ETA_MAX, 0.0, 1e-30, 0.0) == ETA_MIN
+
+
+
+@pytest.mark.parametrize("element", ["mini", "taylor-hood"])
+def test_inexact_newton_reaches_the_direct_solution(element: str) -> None:
+    """Newton with Krylov at Eisenstat-Walker tolerances converges to the same state as
+    Newton with the direct solver, in about as many iterations."""
+    problem = _inclusion_problem()
+    sols = {}
+    for linear in ("pardiso", "krylov"):
+        form = MixedForm(problem, element=element)
+        sol = NewtonSolver(form, SolverOptions(steps=2, linear_solver=linear)).solve()
+        assert sol.converged
+        sols[linear] = (form.gfu.vec.FV().NumPy().copy(), sol.newton_iterations)
+    (x_d, it_d), (x_k, it_k) = sols["pardiso"], sols["krylov"]
+    free = np.abs(x_d) > 0
+    assert np.max(np.abs(x_k - x_d)) <= 1e-6 * np.max(np.abs(x_d[free]))
+    assert it_k <= it_d + 3
+
+
+
+def test_a_failed_line_search_on_a_loose_krylov_direction_retries_tighter(monkeypatch) -> None:
+    """With a Krylov tolerance far too loose (0.5), a direction can be so poor that the line
+    search finds no step; the solver then solves it again 100x tighter instead of giving up
+    (without the retry this load step fails twice and is cut: 3 Newton solves, 18 its)."""
+    from brainbulge.solver import inexact, newton
+
+    for module in (newton, inexact):  # the loosest tolerance: at each solve, and the cap
+        monkeypatch.setattr(module, "ETA_MAX", 0.5)
+    form = MixedForm(_inclusion_problem(), element="mini")
+    ns = NewtonSolver(form, SolverOptions(steps=1, linear_solver="krylov"))
+    sol = ns.solve()
+    assert sol.converged
+    assert ns.tightened_solves >= 1
+    assert len(ns.history) == 1  # one Newton solve: no load-step cut
