@@ -122,7 +122,7 @@ def remove_teeth(tissue: np.ndarray, neighbours: np.ndarray, passes: int = 3) ->
         differ = (has & (nb != tissue[:, None])).sum(axis=1)
         counts = np.stack([(nb == c).sum(axis=1) for c in range(_N_CODES)], axis=1)
         counts[np.arange(len(tissue)), tissue] = -1
-        flip = (differ >= 3) & (has.sum(axis=1) >= 3)
+        flip = (differ >= 3) & has.all(axis=1)
         if not flip.any():
             break
         tissue[flip] = np.argmax(counts[flip], axis=1)
@@ -174,10 +174,10 @@ def _guarded_move(nodes: np.ndarray, tets: np.ndarray, incidence: csr_matrix, id
 
 def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, image: TissueImage,
                    intracranial_volume_ml: float | None = None, smoothing_voxels: float = 1.0,
-                   rounds: int = 4, newton_steps: int = 2, step_cap: float = 0.5,
+                   rounds: int = 5, newton_steps: int = 2, step_cap: float = 0.5,
                    min_volume_ratio: float = 0.25, min_dihedral_deg: float = 10.0,
                    teeth_passes: int = 3, retag: bool = True, volume_tolerance: float = 0.005,
-                   level_sets: TissueLevelSets | None = None,
+                   level_sets: TissueLevelSets | None = None, relax: float = 0.5,
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Nodes (mm) and tissue tags with the tagged interfaces fitted to the smoothed label
     surfaces (module docstring); the outer surface's nodes stay. ``intracranial_volume_ml``:
@@ -194,6 +194,11 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
     incidence = _node_tet_matrix(tets, len(nodes))
     fixed = np.zeros(len(nodes), dtype=bool)
     fixed[_outer_face_nodes(tets, neighbours)] = True
+    # the outer layer's interfaces (the CSF under the skull, thinner than the elements, is a
+    # volume-matched dither of the layer's tets) stay as tagged: its tets' nodes do not move
+    outer_layer = fixed[tets].any(axis=1)
+    pinned = fixed.copy()
+    pinned[tets[outer_layer]] = True
     vol0 = tet_volumes_mm3(nodes, tets)
     dih0 = dihedral_angles_deg(nodes, tets).min(axis=1)
     target = _target_volumes(image, vol0.sum(), intracranial_volume_ml)
@@ -201,9 +206,13 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
     edge = _mean_edge_mm(nodes, tets)
     tissue = remove_teeth(tissue, neighbours, teeth_passes)
     for r in range(rounds):
+        if retag and r > 0:
+            tissue = _retag(ls, offset, nodes, tets, tissue, neighbours, codes, fixed)
+            tissue = remove_teeth(tissue, neighbours, teeth_passes)
         vol = tet_volumes_mm3(nodes, tets)
-        idx, a, b = interface_pairs(incidence, tissue, vol, fixed)
+        idx, a, b = interface_pairs(incidence, tissue, vol, pinned)
         ok = np.isin(a, codes) & np.isin(b, codes)
+        ok[ok] = _resolved(ls, offset, nodes, tets, tissue, incidence, idx[ok], a[ok], b[ok])
         idx, a, b = idx[ok], a[ok], b[ok]
         for _ in range(newton_steps):
             psi, grad = _pair_level(ls, offset, nodes[idx], a, b)
@@ -214,13 +223,16 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
             step *= np.minimum(1.0, cap / np.maximum(length, 1e-12))[:, None]
             nodes = _guarded_move(nodes, tets, incidence, idx, step, vol0, dih0,
                                   min_volume_ratio, min_dihedral_deg)
-        if retag:
-            tissue = _retag(ls, offset, nodes, tets, tissue, neighbours, codes)
-            tissue = remove_teeth(tissue, neighbours, teeth_passes)
+            if relax:
+                ring = np.setdiff1d(np.unique(tets[incidence[idx].indices]), idx)
+                ring = ring[~fixed[ring]]
+                step = relax * (_neighbour_mean(nodes, tets, ring) - nodes[ring])
+                nodes = _guarded_move(nodes, tets, incidence, ring, step, vol0, dih0,
+                                      min_volume_ratio, min_dihedral_deg)
         vol = tet_volumes_mm3(nodes, tets)
         err = _update_offsets(offset, nodes, tets, tissue, neighbours, vol, target, codes)
-        log.info("interfaces round %d: %d nodes, worst volume error %.2f %%", r + 1, len(idx),
-                 100 * err)
+        log.info("interfaces round %d: %d nodes, worst volume error %.2f %%, offsets %s",
+                 r + 1, len(idx), 100 * err, np.round(offset[codes], 2))
         if err < volume_tolerance and r >= 1:
             break
     return nodes, tissue.astype(np.int8)
@@ -242,8 +254,39 @@ def _mean_edge_mm(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return total / np.maximum(count, 1)
 
 
+def _resolved(ls: TissueLevelSets, offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
+              tissue: np.ndarray, incidence: csr_matrix, idx: np.ndarray, a: np.ndarray,
+              b: np.ndarray) -> np.ndarray:
+    """Whether the level sets resolve each node's interface: at least half of its ``a`` tets
+    have ``psi_ab < 0`` at their centroid and half of its ``b`` tets ``psi_ab > 0``. A layer
+    thinner than the elements (the CSF under the skull, a coarse mesh's cortex) is tagged as a
+    volume-matched dither of whole tets; its nodes stay."""
+    sub = incidence[idx].tocoo()
+    row, tet = sub.row, sub.col
+    centroids = nodes[tets[tet]].mean(axis=1)
+    psi, _ = _pair_level(ls, offset, centroids, a[row], b[row], gradient=False)
+    agree = np.where(tissue[tet] == a[row], psi < 0, np.where(tissue[tet] == b[row], psi > 0,
+                                                              True))
+    relevant = (tissue[tet] == a[row]) | (tissue[tet] == b[row])
+    good = np.bincount(row, weights=agree & relevant, minlength=len(idx))
+    count = np.bincount(row, weights=relevant, minlength=len(idx))
+    return good >= 0.5 * count
+
+
+def _neighbour_mean(nodes: np.ndarray, tets: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Mean position of the edge neighbours of each node in ``idx`` (mm)."""
+    i, j = np.triu_indices(4, 1)
+    a, b = tets[:, i].ravel(), tets[:, j].ravel()
+    edges = np.unique(np.sort(np.stack([a, b], axis=1), axis=1), axis=0)
+    n = len(nodes)
+    adj = coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
+                                                 np.r_[edges[:, 1], edges[:, 0]])),
+                     shape=(n, n)).tocsr()[idx]
+    return (adj @ nodes) / np.asarray(adj.sum(axis=1))
+
+
 def _pair_level(ls: TissueLevelSets, offset: np.ndarray, points: np.ndarray, a: np.ndarray,
-                b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                b: np.ndarray, gradient: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """``psi_ab`` and its gradient at ``points`` for per-point tissue pairs ``(a, b)``."""
     psi = np.zeros(len(points))
     grad = np.zeros((len(points), 3))
@@ -251,16 +294,18 @@ def _pair_level(ls: TissueLevelSets, offset: np.ndarray, points: np.ndarray, a: 
         for sel, sign in ((a == code, 0.5), (b == code, -0.5)):
             if sel.any():
                 psi[sel] += sign * (ls.sample(int(code), points[sel]) + offset[code])
-                grad[sel] += sign * ls.gradient(int(code), points[sel])
+                if gradient:
+                    grad[sel] += sign * ls.gradient(int(code), points[sel])
     return psi, grad
 
 
 def _retag(ls: TissueLevelSets, offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
-           tissue: np.ndarray, neighbours: np.ndarray, codes: np.ndarray) -> np.ndarray:
+           tissue: np.ndarray, neighbours: np.ndarray, codes: np.ndarray, fixed: np.ndarray
+           ) -> np.ndarray:
     """Tets next to an interface take the tissue of least ``phi_c + o_c`` at their centroid
     among their own and their neighbours' tissues, if that level is negative there."""
     nb = np.where(neighbours >= 0, tissue[np.maximum(neighbours, 0)], tissue[:, None])
-    near = np.flatnonzero(np.any(nb != tissue[:, None], axis=1))
+    near = np.flatnonzero(np.any(nb != tissue[:, None], axis=1) & ~fixed[tets].any(axis=1))
     centroids = nodes[tets[near]].mean(axis=1)
     level = np.full((len(near), _N_CODES), np.inf)
     for code in codes:
@@ -286,7 +331,8 @@ def _target_volumes(image: TissueImage, mesh_mm3: float, icv_ml: float | None) -
 
 def _update_offsets(offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
                     tissue: np.ndarray, neighbours: np.ndarray, vol: np.ndarray,
-                    target: np.ndarray, codes: np.ndarray) -> float:
+                    target: np.ndarray, codes: np.ndarray, damping: float = 0.7,
+                    max_offset_mm: float = 1.5) -> float:
     """``o_c <- o_c - 2 (V_c^* - V_c) / A_c`` (module docstring, 5.); returns the worst
     relative volume error before the update."""
     mesh = np.bincount(tissue, weights=vol, minlength=_N_CODES)
@@ -299,5 +345,7 @@ def _update_offsets(offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
         if target[c] <= 0 or area_c[c] <= 0:
             continue
         worst = max(worst, abs(mesh[c] - target[c]) / target[c])
-        offset[c] = np.clip(offset[c] - 2 * (target[c] - mesh[c]) / area_c[c], -2.0, 2.0)
+        if c != CSF:
+            offset[c] = np.clip(offset[c] - damping * 2 * (target[c] - mesh[c]) / area_c[c],
+                                -max_offset_mm, max_offset_mm)
     return worst
