@@ -1,4 +1,4 @@
-"""Tissue interfaces before and after fitting (geometry/brain/interfaces.py): a sphere, the template.
+"""Tissue interfaces before and after fitting (geometry/brain/interfaces.py): sphere, template.
 
 Run ``python benchmarks/bench_interfaces.py [--tets 20000 50000] [--icbm 30000]``.
 

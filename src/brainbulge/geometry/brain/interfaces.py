@@ -47,6 +47,12 @@ from scipy.sparse import coo_matrix, csr_matrix
 
 from brainbulge.geometry.brain.labels import CSF, TISSUES, TissueImage
 from brainbulge.geometry.brain.quality import dihedral_angles_deg
+from brainbulge.geometry.brain.regions import (
+    _drain_fullest,
+    _fill_shortest,
+    _relative_error,
+    tissue_fractions,
+)
 from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
 
 log = logging.getLogger("brainbulge")
@@ -112,20 +118,28 @@ def face_neighbours(tets: np.ndarray) -> np.ndarray:
     return out.reshape(-1, 4)
 
 
-def remove_teeth(tissue: np.ndarray, neighbours: np.ndarray, passes: int = 3) -> np.ndarray:
-    """Tags with "teeth" removed (module docstring, 2.): a tet whose tag differs from at least
-    3 of its face neighbours' takes their most frequent tag."""
+def remove_teeth(tissue: np.ndarray, neighbours: np.ndarray, passes: int = 3,
+                 level: np.ndarray | None = None) -> np.ndarray:
+    """Tags with "teeth" removed (module docstring, 2.): an interior tet whose tag differs from
+    at least 3 of its face neighbours' takes their most frequent tag. With ``level`` ((m, 6):
+    ``phi_c + o_c`` at each centroid) only where that tissue's level is lower there than the
+    tet's own: a tooth that the label surfaces confirm (a coarse mesh's dither of a thin
+    structure, which holds its volume) stays."""
     tissue = tissue.copy()
     has = neighbours >= 0
+    rows = np.arange(len(tissue))
     for _ in range(passes):
         nb = np.where(has, tissue[np.maximum(neighbours, 0)], -1)
         differ = (has & (nb != tissue[:, None])).sum(axis=1)
         counts = np.stack([(nb == c).sum(axis=1) for c in range(_N_CODES)], axis=1)
-        counts[np.arange(len(tissue)), tissue] = -1
+        counts[rows, tissue] = -1
+        new = np.argmax(counts, axis=1)
         flip = (differ >= 3) & has.all(axis=1)
+        if level is not None:
+            flip &= level[rows, new] < level[rows, tissue]
         if not flip.any():
             break
-        tissue[flip] = np.argmax(counts[flip], axis=1)
+        tissue[flip] = new[flip]
     return tissue
 
 
@@ -204,15 +218,17 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
     target = _target_volumes(image, vol0.sum(), intracranial_volume_ml)
     offset = np.zeros(_N_CODES)
     edge = _mean_edge_mm(nodes, tets)
-    tissue = remove_teeth(tissue, neighbours, teeth_passes)
+    tissue = remove_teeth(tissue, neighbours, teeth_passes,
+                          _centroid_levels(ls, offset, nodes, tets, codes))
     for r in range(rounds):
         if retag and r > 0:
             tissue = _retag(ls, offset, nodes, tets, tissue, neighbours, codes, fixed)
-            tissue = remove_teeth(tissue, neighbours, teeth_passes)
+            tissue = remove_teeth(tissue, neighbours, teeth_passes,
+                                  _centroid_levels(ls, offset, nodes, tets, codes))
         vol = tet_volumes_mm3(nodes, tets)
         idx, a, b = interface_pairs(incidence, tissue, vol, pinned)
         ok = np.isin(a, codes) & np.isin(b, codes)
-        ok[ok] = _resolved(ls, offset, nodes, tets, tissue, incidence, idx[ok], a[ok], b[ok])
+        ok[ok] = _resolved(ls, offset, nodes[idx[ok]], a[ok], b[ok], edge[idx[ok]])
         idx, a, b = idx[ok], a[ok], b[ok]
         for _ in range(newton_steps):
             psi, grad = _pair_level(ls, offset, nodes[idx], a, b)
@@ -235,7 +251,27 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
                  r + 1, len(idx), 100 * err, np.round(offset[codes], 2))
         if err < volume_tolerance and r >= 1:
             break
+    tissue = balance_volumes(image, nodes, tets, tissue, target, volume_tolerance)
     return nodes, tissue.astype(np.int8)
+
+
+def balance_volumes(image: TissueImage, nodes: np.ndarray, tets: np.ndarray,
+                    tissue: np.ndarray, target: np.ndarray, volume_tolerance: float = 0.005,
+                    max_passes: int = 60) -> np.ndarray:
+    """Tags with every tissue's volume within ``volume_tolerance`` of ``target`` (mm^3): what
+    the level offsets cannot move (unresolved, pinned interfaces; teeth removed from a dither)
+    is handed over in whole tets that hold both tissues, least image fraction lost first
+    (:func:`regions.tag_tissue`'s exchange, on the fitted nodes)."""
+    frac = tissue_fractions(image, nodes, tets)
+    frac[np.arange(len(tets)), tissue] = np.maximum(frac[np.arange(len(tets)), tissue], 1e-3)
+    vol = tet_volumes_mm3(nodes, tets)
+    tag = tissue.astype(np.int64).copy()
+    for _ in range(max_passes):
+        if _relative_error(tag, vol, target).max() < volume_tolerance:
+            break
+        _fill_shortest(tag, frac, vol, target)
+        _drain_fullest(tag, frac, vol, target)
+    return tag
 
 
 def _outer_face_nodes(tets: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
@@ -254,23 +290,26 @@ def _mean_edge_mm(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return total / np.maximum(count, 1)
 
 
-def _resolved(ls: TissueLevelSets, offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
-              tissue: np.ndarray, incidence: csr_matrix, idx: np.ndarray, a: np.ndarray,
-              b: np.ndarray) -> np.ndarray:
-    """Whether the level sets resolve each node's interface: at least half of its ``a`` tets
-    have ``psi_ab < 0`` at their centroid and half of its ``b`` tets ``psi_ab > 0``. A layer
-    thinner than the elements (the CSF under the skull, a coarse mesh's cortex) is tagged as a
-    volume-matched dither of whole tets; its nodes stay."""
-    sub = incidence[idx].tocoo()
-    row, tet = sub.row, sub.col
-    centroids = nodes[tets[tet]].mean(axis=1)
-    psi, _ = _pair_level(ls, offset, centroids, a[row], b[row], gradient=False)
-    agree = np.where(tissue[tet] == a[row], psi < 0, np.where(tissue[tet] == b[row], psi > 0,
-                                                              True))
-    relevant = (tissue[tet] == a[row]) | (tissue[tet] == b[row])
-    good = np.bincount(row, weights=agree & relevant, minlength=len(idx))
-    count = np.bincount(row, weights=relevant, minlength=len(idx))
-    return good >= 0.5 * count
+def _resolved(ls: TissueLevelSets, offset: np.ndarray, points: np.ndarray, a: np.ndarray,
+              b: np.ndarray, edge: np.ndarray, depth: float = 0.5) -> np.ndarray:
+    """Whether the mesh resolves each node's interface: at the node's Newton point
+    ``x* = x - psi grad(psi) / |grad(psi)|^2``, both tissues reach ``depth`` edge lengths
+    into their sides, ``phi_a(x* - d n) < -d / 2`` and ``phi_b(x* + d n) < -d / 2`` with
+    ``d = depth h`` and ``n = grad(psi) / |grad(psi)|`` (from ``a`` to ``b``). A structure
+    thinner than that (a coarse mesh's cortex, sulcal CSF, the CSF under the skull) is tagged
+    as a volume-matched dither of whole tets: its nodes stay."""
+    psi, grad = _pair_level(ls, offset, points, a, b)
+    g2 = np.maximum(np.einsum("ij,ij->i", grad, grad), 1e-6)
+    target = points - (psi / g2)[:, None] * grad
+    d = (depth * edge)[:, None] * grad / np.sqrt(g2)[:, None]
+    inside_a = np.zeros(len(points))
+    inside_b = np.zeros(len(points))
+    for code in np.unique(np.concatenate([a, b])):
+        for sel, out, sign in ((a == code, inside_a, -1.0), (b == code, inside_b, 1.0)):
+            if sel.any():
+                out[sel] = ls.sample(int(code), target[sel] + sign * d[sel]) + offset[code]
+    half = 0.5 * depth * edge
+    return (inside_a < -half) & (inside_b < -half)
 
 
 def _neighbour_mean(nodes: np.ndarray, tets: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -297,6 +336,16 @@ def _pair_level(ls: TissueLevelSets, offset: np.ndarray, points: np.ndarray, a: 
                 if gradient:
                     grad[sel] += sign * ls.gradient(int(code), points[sel])
     return psi, grad
+
+
+def _centroid_levels(ls: TissueLevelSets, offset: np.ndarray, nodes: np.ndarray,
+                     tets: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """``phi_c + o_c`` at every tet's centroid, (m, 6); +inf for tissues without a level."""
+    centroids = nodes[tets].mean(axis=1)
+    level = np.full((len(tets), _N_CODES), np.inf)
+    for code in codes:
+        level[:, code] = ls.sample(int(code), centroids) + offset[code]
+    return level
 
 
 def _retag(ls: TissueLevelSets, offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
@@ -332,7 +381,7 @@ def _target_volumes(image: TissueImage, mesh_mm3: float, icv_ml: float | None) -
 def _update_offsets(offset: np.ndarray, nodes: np.ndarray, tets: np.ndarray,
                     tissue: np.ndarray, neighbours: np.ndarray, vol: np.ndarray,
                     target: np.ndarray, codes: np.ndarray, damping: float = 0.7,
-                    max_offset_mm: float = 1.5) -> float:
+                    max_offset_mm: float = 1.0) -> float:
     """``o_c <- o_c - 2 (V_c^* - V_c) / A_c`` (module docstring, 5.); returns the worst
     relative volume error before the update."""
     mesh = np.bincount(tissue, weights=vol, minlength=_N_CODES)
