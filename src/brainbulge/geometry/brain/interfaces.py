@@ -119,12 +119,13 @@ def face_neighbours(tets: np.ndarray) -> np.ndarray:
 
 
 def remove_teeth(tissue: np.ndarray, neighbours: np.ndarray, passes: int = 3,
-                 level: np.ndarray | None = None) -> np.ndarray:
+                 level: np.ndarray | None = None, margin: np.ndarray | float = 0.0
+                 ) -> np.ndarray:
     """Tags with "teeth" removed (module docstring, 2.): an interior tet whose tag differs from
     at least 3 of its face neighbours' takes their most frequent tag. With ``level`` ((m, 6):
     ``phi_c + o_c`` at each centroid) only where that tissue's level is lower there than the
-    tet's own: a tooth that the label surfaces confirm (a coarse mesh's dither of a thin
-    structure, which holds its volume) stays."""
+    tet's own plus ``margin`` (mm, per tet or one): a tooth that the label surfaces confirm
+    (a coarse mesh's dither of a thin structure, which holds its volume) stays."""
     tissue = tissue.copy()
     has = neighbours >= 0
     rows = np.arange(len(tissue))
@@ -136,7 +137,7 @@ def remove_teeth(tissue: np.ndarray, neighbours: np.ndarray, passes: int = 3,
         new = np.argmax(counts, axis=1)
         flip = (differ >= 3) & has.all(axis=1)
         if level is not None:
-            flip &= level[rows, new] < level[rows, tissue]
+            flip &= level[rows, new] < level[rows, tissue] + margin
         if not flip.any():
             break
         tissue[flip] = new[flip]
@@ -190,7 +191,8 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
                    intracranial_volume_ml: float | None = None, smoothing_voxels: float = 1.0,
                    rounds: int = 5, newton_steps: int = 2, step_cap: float = 0.5,
                    min_volume_ratio: float = 0.25, min_dihedral_deg: float = 10.0,
-                   teeth_passes: int = 3, retag: bool = True, volume_tolerance: float = 0.005,
+                   teeth_passes: int = 3, teeth_margin: float = 0.5, retag: bool = True,
+                   volume_tolerance: float = 0.005,
                    level_sets: TissueLevelSets | None = None, relax: float = 0.5,
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Nodes (mm) and tissue tags with the tagged interfaces fitted to the smoothed label
@@ -218,13 +220,14 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
     target = _target_volumes(image, vol0.sum(), intracranial_volume_ml)
     offset = np.zeros(_N_CODES)
     edge = _mean_edge_mm(nodes, tets)
+    margin = teeth_margin * np.cbrt(6 * np.sqrt(2) * vol0)  # edge of a regular tet
     tissue = remove_teeth(tissue, neighbours, teeth_passes,
-                          _centroid_levels(ls, offset, nodes, tets, codes))
+                          _centroid_levels(ls, offset, nodes, tets, codes), margin)
     for r in range(rounds):
         if retag and r > 0:
             tissue = _retag(ls, offset, nodes, tets, tissue, neighbours, codes, fixed)
             tissue = remove_teeth(tissue, neighbours, teeth_passes,
-                                  _centroid_levels(ls, offset, nodes, tets, codes))
+                                  _centroid_levels(ls, offset, nodes, tets, codes), margin)
         vol = tet_volumes_mm3(nodes, tets)
         idx, a, b = interface_pairs(incidence, tissue, vol, pinned)
         ok = np.isin(a, codes) & np.isin(b, codes)
