@@ -87,9 +87,8 @@ def main() -> None:
     parser.add_argument("--icbm", type=int, default=0)
     args = parser.parse_args()
     image = sphere_image()
-    cols = list(sphere_metrics.__annotations__ and ["area_ratio", "tilt_deg", "dist_p95_mm",
-                                                      "dist_max_mm", "min_dihedral_deg",
-                                                      "white_volume_ratio"])
+    cols = ["area_ratio", "tilt_deg", "dist_p95_mm", "dist_max_mm", "min_dihedral_deg",
+            "white_volume_ratio"]
     print("sphere R = 20 mm: tets  state  " + "  ".join(cols))
     for n in args.tets:
         nodes, tets, tissue, icv = tagged_mesh(image, n)
@@ -119,6 +118,14 @@ def main() -> None:
                       for c, name in TISSUES.items() if name != "csf"]
             print(f"  {state:9s}  {q['min_dihedral_deg']:.2f}  {q['inverted_tets']}  "
                   + "  ".join(f"{r:.4f}" for r in ratios))
+        nb = face_neighbours(tets)
+        t, f = np.nonzero((nb >= 0) & (tissue[np.maximum(nb, 0)] != tissue[:, None]))
+        iface = np.unique(tets[t[:, None], np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3],
+                                                     [0, 1, 2]])[f]])
+        moved = np.linalg.norm(fitted[0] - nodes, axis=1) > 1e-9
+        print(f"  nodes moved: {moved.sum()} ({moved[iface].sum()} of the {len(iface)} "
+              f"interface nodes of the staircase); tets re-tagged: "
+              f"{(fitted[1] != tissue).sum()} of {len(tets)}")
 
 
 if __name__ == "__main__":

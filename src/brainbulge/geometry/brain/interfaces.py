@@ -191,7 +191,7 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
                    intracranial_volume_ml: float | None = None, smoothing_voxels: float = 1.0,
                    rounds: int = 5, newton_steps: int = 2, step_cap: float = 0.5,
                    min_volume_ratio: float = 0.25, min_dihedral_deg: float = 10.0,
-                   teeth_passes: int = 3, teeth_margin: float = 0.5, retag: bool = True,
+                   teeth_passes: int = 3, teeth_margin_mm: float = 1.0, retag: bool = True,
                    volume_tolerance: float = 0.005,
                    level_sets: TissueLevelSets | None = None, relax: float = 0.5,
                    ) -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +220,7 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
     target = _target_volumes(image, vol0.sum(), intracranial_volume_ml)
     offset = np.zeros(_N_CODES)
     edge = _mean_edge_mm(nodes, tets)
-    margin = teeth_margin * np.cbrt(6 * np.sqrt(2) * vol0)  # edge of a regular tet
+    margin = teeth_margin_mm
     tissue = remove_teeth(tissue, neighbours, teeth_passes,
                           _centroid_levels(ls, offset, nodes, tets, codes), margin)
     for r in range(rounds):
