@@ -240,7 +240,7 @@ def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
                             refinements=1)
     assert len(fine.tets) == 8 * len(coarse.tets)
     moved = np.linalg.norm(fine.nodes_mm[: len(coarse.nodes_mm)] - coarse.nodes_mm, axis=1)
-    assert np.mean(moved == 0) > 0.7 and moved.max() < 6.0
+    assert np.mean(moved == 0) > 0.5 and moved.max() < 6.0
     surface = np.unique(coarse.faces)
     assert np.array_equal(fine.nodes_mm[surface], coarse.nodes_mm[surface])
     assert fine.quality()["inverted_tets"] == 0

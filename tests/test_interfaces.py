@@ -42,8 +42,11 @@ def test_level_set_is_a_distance_to_the_sphere() -> None:
     rng = np.random.default_rng(0)
     d = rng.normal(size=(500, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
-    for r in (16.0, 20.0, 24.0):
-        assert np.abs(ls.sample(WHITE, r * d) - (r - 20.0)).max() < 0.4
+    # the zero level on the sphere to a tenth of a voxel; 4 mm off it a distance to ~10 %
+    # (voxel-centre distances to an oblique boundary run up to ~0.4 voxel long)
+    assert np.abs(ls.sample(WHITE, 20.0 * d)).max() < 0.15
+    for r in (16.0, 24.0):
+        assert np.abs(ls.sample(WHITE, r * d) - (r - 20.0)).max() < 0.5
     grad = ls.gradient(WHITE, 20.0 * d)
     assert np.abs(np.einsum("ij,ij->i", grad, d) - 1.0).max() < 0.1
 
@@ -59,7 +62,8 @@ def test_teeth_take_the_neighbours_tag() -> None:
     nb4 = np.array([[1, 2, 3, 4], [0, -1, -1, -1], [0, -1, -1, -1], [0, -1, -1, -1],
                     [0, -1, -1, -1]])
     assert remove_teeth(np.array([2, 1, 1, 1, 3]), nb4)[0] == 1
-    assert remove_teeth(np.array([2, 1, 2, 1, 3]), nb4)[0] == 2  # 2 of 4 differ: stays
+    assert remove_teeth(np.array([2, 1, 2, 2, 3]), nb4)[0] == 2  # 2 of 4 differ: stays
+    assert remove_teeth(np.array([2, 1, 3, 1, 1]), nb4)[0] == 1  # the majority of 4
 
 
 def test_sphere_interface_is_fitted(sphere_case) -> None:
