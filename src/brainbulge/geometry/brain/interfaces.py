@@ -1,37 +1,44 @@
 """Tissue interfaces fitted to smooth surfaces: interface nodes moved onto smoothed label levels.
 
 Tissue tags are per tetrahedron (:func:`regions.tag_tissue`), so the interfaces between tissues
-are element faces: voxel/element staircases whose faces tilt ~50 deg from the true normal and
-overstate the area ~1.6x. Strain maxima sit on such steps and grow under refinement. This
-module fits the tagged interfaces to the smooth surfaces the labels describe:
+are element faces: staircases whose faces tilt ~45 deg from the true normal and overstate the
+area ~1.55x (a sphere, ``benchmarks/bench_interfaces.py``). Strain maxima sit on such steps
+and grow under refinement. This module fits the tagged interfaces to the label surfaces:
 
 1. Level sets. For each tissue ``c`` the voxel mask ``M_c`` (CSF: CSF or background, the layer
-   under the skull) gives a signed distance, negative inside, Gaussian-smoothed by
-   ``smoothing_voxels`` (sigma, in voxels):
-   ``phi_c = G_sigma * (d(x, M_c) - d(x, not M_c) -+ h/2)``, ``h`` the voxel size (the
-   half-voxel shift makes voxel-centre distances distances to the faces, as in
-   :mod:`envelope`). Sampled at world points by trilinear interpolation through the affine.
-   The surface between tissues ``a`` and ``b`` is the zero level of
+   under the skull) gives a signed distance, negative inside, Gaussian-smoothed (``sigma =
+   smoothing_voxels``): ``phi_c = G_sigma * (d(x, M_c) - d(x, not M_c) -+ h/2)``, ``h`` the
+   voxel size (the half-voxel shift makes voxel-centre distances distances to the voxel
+   faces, as in :mod:`envelope`), sampled by trilinear interpolation through the affine. The
+   surface between tissues ``a`` and ``b`` is the zero level of
    ``psi_ab = ((phi_a + o_a) - (phi_b + o_b)) / 2`` (negative on ``a``'s side, ``|grad| ~ 1``),
-   with per-tissue level offsets ``o_c`` (mm).
-2. Teeth. A tet whose tag differs from those of at least 3 of its (at least 3) face
-   neighbours takes their most frequent tag; ``teeth_passes`` sweeps.
-3. Moves. An interface node (its tets carry more than one tissue; not on the outer surface)
-   is moved towards the zero of ``psi_ab`` for its two tissues of largest adjacent volume by
-   Newton steps ``dx = -psi grad(psi) / |grad(psi)|^2``, each capped at ``step_cap`` times the
-   node's mean edge length. Guard: a node's step is halved (up to 4 times, then dropped) while
-   any of its tets would fall below ``min_volume_ratio`` of its volume before fitting, or
-   below ``min(theta_0, min_dihedral_deg)`` in minimum dihedral angle (``theta_0``: the tet's
-   own before fitting): no tet inverts, none is flattened.
-4. Re-tagging (``retag``): after the moves a tet next to an interface takes the tissue of
-   least ``phi_c + o_c`` at its centroid among its own and its face neighbours' tissues,
-   when that is negative (the centroid lies inside that tissue's level) -- a staircase cell
-   cut off by the fitted surface changes sides -- followed by a teeth sweep.
-5. Volumes. The targets are the image's voxel volumes scaled to the mesh (``V_c^* =
-   N_c v_vox V_mesh / V_icv``, CSF the rest, as :func:`regions.tag_tissue`); after each
-   round ``o_c <- o_c - 2 (V_c^* - V_c) / A_c`` (``A_c``: the tissue's interface area; the
-   factor 2 undoes the 1/2 in ``psi``) moves every tissue's surface outward by its volume
-   error over its area, until ``|V_c - V_c^*| / V_c^* < volume_tolerance``.
+   ``o_c`` per-tissue level offsets (mm, step 5).
+2. Teeth. An interior tet whose tag differs from at least 3 of its 4 face neighbours' takes
+   their most frequent tag ``n``, where ``phi_n + o_n < phi_own + o_own + teeth_margin_mm``
+   at its centroid (a tooth the label surfaces clearly confirm -- a sub-element structure,
+   e.g. a small ventricle -- stays); ``teeth_passes`` sweeps.
+3. Moves. Interface nodes (their tets carry more than one tissue) move, except those of the
+   outer layer's tets (the CSF under the skull, thinner than the elements, is a
+   volume-matched dither of that layer: it stays as tagged) and those of unresolved
+   interfaces (at the Newton point ``x*`` below, either tissue reaches less than ``d = h_e/2``
+   into its side: ``phi_a(x* - d n) > -d/2`` or ``phi_b(x* + d n) > -d/2``, ``n`` the unit
+   gradient, ``h_e`` the node's mean edge: a coarse mesh's cortex or sulcal CSF). Each node
+   takes ``newton_steps`` Newton steps ``dx = -psi_ab grad(psi_ab) / |grad(psi_ab)|^2`` for
+   its two tissues of largest adjacent volume, each capped at ``step_cap h_e``; their
+   free neighbours relax towards their neighbours' mean by ``relax``. Guard: a node's step is
+   halved (4 times, then dropped) while any of its tets would fall below
+   ``min_volume_ratio`` of its volume before fitting, or its minimum dihedral angle below
+   ``min(theta_0, min_dihedral_deg)`` (``theta_0`` its own before): no tet inverts.
+4. Re-tagging (``retag``, from the second of ``rounds``): a tet next to an interface takes
+   the tissue of least ``phi_c + o_c`` at its centroid among its own and its neighbours',
+   if that is negative -- a staircase cell cut off by the fitted surface changes sides.
+5. Volumes. Targets: the image's voxel volumes scaled to the mesh (``V_c^* =
+   N_c v_vox V_mesh / V_icv``, CSF the rest, as :func:`regions.tag_tissue`). After each
+   round ``o_c <- o_c - 2 k (V_c^* - V_c) / A_c`` (``A_c``: the tissue's interface area,
+   ``k = 0.7`` damping, ``|o_c| <= 1 mm``, ``o_CSF = 0``): a resolved surface moves out by
+   its volume error over its area. What the offsets cannot reach (pinned or unresolved
+   interfaces) is handed over in whole tets at the end (:func:`balance_volumes`), so every
+   tissue ends within ``volume_tolerance`` of its target.
 
 The outer surface (the skull's inner surface) is not touched. All lengths mm, volumes mm^3.
 """
