@@ -215,6 +215,7 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
     codes = np.array([c for c in codes if c in ls.phi])
     neighbours = face_neighbours(tets)
     incidence = _node_tet_matrix(tets, len(nodes))
+    adjacency = _edge_adjacency(tets, len(nodes))
     fixed = np.zeros(len(nodes), dtype=bool)
     fixed[_outer_face_nodes(tets, neighbours)] = True
     # the outer layer's interfaces (the CSF under the skull, thinner than the elements, is a
@@ -252,7 +253,7 @@ def fit_interfaces(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, imag
             if relax:
                 ring = np.setdiff1d(np.unique(tets[incidence[idx].indices]), idx)
                 ring = ring[~fixed[ring]]
-                step = relax * (_neighbour_mean(nodes, tets, ring) - nodes[ring])
+                step = relax * (_neighbour_mean(nodes, adjacency, ring) - nodes[ring])
                 nodes = _guarded_move(nodes, tets, incidence, ring, step, vol0, dih0,
                                       min_volume_ratio, min_dihedral_deg)
         vol = tet_volumes_mm3(nodes, tets)
@@ -322,15 +323,19 @@ def _resolved(ls: TissueLevelSets, offset: np.ndarray, points: np.ndarray, a: np
     return (inside_a < -half) & (inside_b < -half)
 
 
-def _neighbour_mean(nodes: np.ndarray, tets: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """Mean position of the edge neighbours of each node in ``idx`` (mm)."""
+def _edge_adjacency(tets: np.ndarray, n_nodes: int) -> csr_matrix:
+    """Sparse (n, n) node adjacency along the tets' edges (ones)."""
     i, j = np.triu_indices(4, 1)
     a, b = tets[:, i].ravel(), tets[:, j].ravel()
-    edges = np.unique(np.sort(np.stack([a, b], axis=1), axis=1), axis=0)
-    n = len(nodes)
-    adj = coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                 np.r_[edges[:, 1], edges[:, 0]])),
-                     shape=(n, n)).tocsr()[idx]
+    adj = coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])),
+                     shape=(n_nodes, n_nodes)).tocsr()
+    adj.data[:] = 1.0  # duplicates (an edge in several tets) summed: count it once
+    return adj
+
+
+def _neighbour_mean(nodes: np.ndarray, adjacency: csr_matrix, idx: np.ndarray) -> np.ndarray:
+    """Mean position of the edge neighbours of each node in ``idx`` (mm)."""
+    adj = adjacency[idx]
     return (adj @ nodes) / np.asarray(adj.sum(axis=1))
 
 
