@@ -25,6 +25,7 @@ from brainbulge.geometry.brain.boundaries import (
     unilateral_flap,
 )
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
+from brainbulge.geometry.brain.interfaces import fit_interfaces
 from brainbulge.geometry.brain.labels import TISSUES, TissueImage
 from brainbulge.geometry.brain.quality import quality_stats
 from brainbulge.geometry.brain.refine import move_onto_surface, refine_uniformly
@@ -259,6 +260,7 @@ def _labelled(nodes: np.ndarray, tets: np.ndarray, image: TissueImage,
     """``(nodes, tets)`` with tissues, sides, the base below ``base_z_mm`` and the flaps."""
     tissue = tag_tissue(image, nodes, tets, intracranial_volume_ml=envelope.volume_ml(),
                         plane=midsagittal)
+    nodes, tissue = fit_interfaces(nodes, tets, tissue, image, envelope.volume_ml())
     side = midsagittal.side(nodes[tets].mean(axis=1))
     faces, face_tet = boundary_faces(tets)
     base = nodes[faces][:, :, 2].mean(axis=1) < base_z_mm
