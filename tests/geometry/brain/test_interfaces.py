@@ -21,8 +21,7 @@ from brainbulge.geometry.brain.interfaces import (
     tissue_level_sets,
 )
 from brainbulge.geometry.brain.labels import GRAY, WHITE
-from brainbulge.geometry.brain.quality import quality_stats
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
+from brainbulge.geometry.brain.quality import quality_stats, tet_volumes_mm3
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from bench_interfaces import sphere_image, sphere_metrics, tagged_mesh  # noqa: E402

@@ -53,14 +53,13 @@ import scipy.ndimage as ndi
 from scipy.sparse import coo_matrix, csr_matrix
 
 from brainbulge.geometry.brain.labels import CSF, TISSUES, TissueImage
-from brainbulge.geometry.brain.quality import dihedral_angles_deg
+from brainbulge.geometry.brain.quality import dihedral_angles_deg, tet_volumes_mm3
 from brainbulge.geometry.brain.regions import (
     _drain_fullest,
     _fill_shortest,
     _relative_error,
     tissue_fractions,
 )
-from brainbulge.geometry.brain.tetmesh import tet_volumes_mm3
 
 log = logging.getLogger("brainbulge")
 
