@@ -55,9 +55,7 @@ from scipy.sparse import coo_matrix, csr_matrix
 from brainbulge.geometry.brain.labels import CSF, TISSUES, TissueImage
 from brainbulge.geometry.brain.quality import dihedral_angles_deg, tet_volumes_mm3
 from brainbulge.geometry.brain.regions import (
-    _drain_fullest,
-    _fill_shortest,
-    _relative_error,
+    exchange_volumes,
     tissue_fractions,
 )
 
@@ -276,11 +274,7 @@ def balance_volumes(image: TissueImage, nodes: np.ndarray, tets: np.ndarray,
     frac[np.arange(len(tets)), tissue] = np.maximum(frac[np.arange(len(tets)), tissue], 1e-3)
     vol = tet_volumes_mm3(nodes, tets)
     tag = tissue.astype(np.int64).copy()
-    for _ in range(max_passes):
-        if _relative_error(tag, vol, target).max() < volume_tolerance:
-            break
-        _fill_shortest(tag, frac, vol, target)
-        _drain_fullest(tag, frac, vol, target)
+    exchange_volumes(tag, frac, vol, target, volume_tolerance, max_passes)
     return tag
 
 

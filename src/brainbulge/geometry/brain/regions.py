@@ -116,12 +116,22 @@ def tag_tissue(
     frac_cls[:, target <= 0] = 0.0
     bias = 1e-6 * (np.arange(frac_cls.shape[1]) % n_codes == CSF)
     tag = np.argmax(frac_cls + bias, axis=1)
+    exchange_volumes(tag, frac_cls, vol, target, volume_tolerance, max_passes)
+    return (tag % n_codes).astype(np.int8)
+
+
+def exchange_volumes(tag: np.ndarray, frac: np.ndarray, vol: np.ndarray, target: np.ndarray,
+                     volume_tolerance: float, max_passes: int) -> None:
+    """Relabel whole tets in place until every class's volume ``sum(vol[tag == c])`` is
+    within ``volume_tolerance`` (relative) of ``target[c]`` (mm^3), or ``max_passes`` passes:
+    each pass the most under-full class takes tets that hold some of it from over-full ones,
+    then the most over-full gives tets away, least image fraction ``frac`` (tets x classes)
+    lost first."""
     for _ in range(max_passes):
         if _relative_error(tag, vol, target).max() < volume_tolerance:
             break
-        _fill_shortest(tag, frac_cls, vol, target)
-        _drain_fullest(tag, frac_cls, vol, target)
-    return (tag % n_codes).astype(np.int8)
+        _fill_shortest(tag, frac, vol, target)
+        _drain_fullest(tag, frac, vol, target)
 
 
 def _relative_error(tag: np.ndarray, vol: np.ndarray, target: np.ndarray) -> np.ndarray:
