@@ -8,12 +8,10 @@ the sphere to about a millimetre, the volumes those of the voxels, no tet invert
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from bench_interfaces import sphere_image, sphere_metrics, tagged_mesh  # benchmarks/ on the path
 from brainbulge.geometry.brain.interfaces import (
     face_neighbours,
     fit_interfaces,
@@ -22,9 +20,6 @@ from brainbulge.geometry.brain.interfaces import (
 )
 from brainbulge.geometry.brain.labels import GRAY, WHITE
 from brainbulge.geometry.brain.quality import quality_stats, tet_volumes_mm3
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_interfaces import sphere_image, sphere_metrics, tagged_mesh  # noqa: E402
 
 
 @pytest.fixture(scope="module")
