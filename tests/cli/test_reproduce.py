@@ -10,6 +10,7 @@ import pytest
 
 from brainbulge.cli import main as cli_main
 from brainbulge.cli import reproduce
+from brainbulge.geometry.brain.defaults import COARSE_TETS
 from brainbulge.studies.craniectomy import attach_study_meshes, case_from_dict
 
 
@@ -39,7 +40,7 @@ def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tet
     common = brain[0]
     _fake_mesh(tmp_path / "mesh", _spec(common))
     if tets >= reproduce.LARGE_TETS:
-        assert common["refine"] == 1 and common["coarse_tets"] == tets // 8
+        assert common["refine"] == 1 and common["coarse_tets"] == COARSE_TETS
         _fake_mesh(tmp_path / "coarse-mesh",
                    _spec({**common, "tets": common["coarse_tets"], "refine": 0}))
     attached = attach_study_meshes(tmp_path, brain)
