@@ -126,10 +126,8 @@ def test_midline_and_stress_keys_of_a_solved_brain(toy_run) -> None:
     # this toy the flap over the swelling side decides it)
     assert abs(s["midline_shift_mm"]) > 1e-3
     # the whole plane's largest lateral displacement (at its vertices) bounds the Monro
-    # level's (read on a grid between them) up to interpolation: on this ~1000-tet toy the
-    # plane's nodes are those within 1 mm of it, the Monro level interpolates nodes up to an
-    # edge (~17 mm) away, which with the fitted gray/white interface read 1.4 % more
-    assert abs(s["max_midline_displacement_mm"]) >= 0.97 * abs(s["midline_shift_mm"])
+    # level's (read on a grid between them) up to interpolation
+    assert abs(s["max_midline_displacement_mm"]) >= 0.999 * abs(s["midline_shift_mm"])
     assert s["mean_hydrostatic_stress_over_shear_modulus"] == pytest.approx(
         s["mean_hydrostatic_stress_kpa"] / s["shear_modulus_kpa"])
     assert not any("pressure_mmhg" in k or "icp" in k.lower()
