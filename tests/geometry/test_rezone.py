@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from brainbulge.geometry.hemidisk import Hemidisk
-from brainbulge.geometry.rezone import _topology, deformed_quality, rezone, triangle_quality
+from brainbulge.geometry.rezone import deformed_quality, rezone, topology, triangle_quality
 
 
 def _map(X: np.ndarray) -> np.ndarray:
@@ -45,7 +45,7 @@ def test_rezoned_mesh_keeps_domain_regions_and_boundaries(rezoned) -> None:
             np.testing.assert_allclose(P[:, 1], 0.0, atol=1e-12)
     # the sector edges stay on their radial lines
     s_lo, s_hi = np.radians(geo.sector_angles_deg)
-    top = _topology(new)
+    top = topology(new)
     sw = top.regions.index("swelling")
     for tri in top.tris[top.region == sw]:
         ang = np.arctan2(top.X[tri, 1], top.X[tri, 0])
@@ -58,7 +58,7 @@ def test_pull_back_inverts_the_deformation(rezoned) -> None:
     (exact in P2 but for the curved elements at the arc); the image of the new mesh is better
     shaped than the image of the old one."""
     _, mesh, u, rz = rezoned
-    top = _topology(rz.mesh)
+    top = topology(rz.mesh)
     exact = _map(top.X)
     on_boundary = {v.nr for el in rz.mesh.Elements(ngs.BND) for v in el.vertices}
     inner = np.array(sorted(set(range(len(top.X))) - on_boundary))
@@ -79,7 +79,7 @@ def test_rezoned_mesh_keeps_the_rim_refinement(rezoned) -> None:
     x_rim = rim + _map(rim)
 
     def median_edge_near_rim(r) -> float:
-        top = _topology(r.mesh)
+        top = topology(r.mesh)
         x = top.X + r.u_vertices  # the deformed vertices, where the mesh was made
         d = np.min(np.linalg.norm(x[:, None] - x_rim[None], axis=2), axis=1)
         P = x[top.tris[np.any(d[top.tris] < 0.003, axis=1)]]

@@ -16,7 +16,7 @@ from brainbulge.model.brain import (
     coarse_brain_mesh_for,
     size_defaults,
 )
-from brainbulge.studies.craniectomy import _with_size_defaults
+from brainbulge.studies.craniectomy import with_size_defaults
 
 
 @pytest.mark.parametrize("tets", [30_000, 100_000, LARGE_TETS - 1])
@@ -82,7 +82,7 @@ def test_the_command_line_passes_only_what_the_user_gave() -> None:
 
 
 def test_a_study_takes_the_defaults_of_its_size() -> None:
-    sc = _with_size_defaults({"tets": 1_400_000, "flap": "left"})
+    sc = with_size_defaults({"tets": 1_400_000, "flap": "left"})
     assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (1, COARSE_TETS, "krylov")
-    sc = _with_size_defaults({"tets": 1_400_000, "linear_solver": "pardiso", "refine": 0})
+    sc = with_size_defaults({"tets": 1_400_000, "linear_solver": "pardiso", "refine": 0})
     assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (0, None, "pardiso")

@@ -16,9 +16,9 @@ from brainbulge.runtime import configure
 configure()
 import ngsolve as ngs
 from netgen.geom2d import unit_square
-from brainbulge.solver.mixed import _compiled
+from brainbulge.solver.mixed import compiled
 ngs.Mesh(unit_square.GenerateMesh(maxh=0.5))
-_compiled(ngs.sin(ngs.x * ngs.y) * ngs.exp(ngs.y) + ngs.x ** 3, native=True)
+compiled(ngs.sin(ngs.x * ngs.y) * ngs.exp(ngs.y) + ngs.x ** 3, native=True)
 """
 
 

@@ -46,7 +46,7 @@ class Rezoned:
 
 
 @dataclass
-class _Topology:
+class Topology:
     X: np.ndarray  # (nv, 2) reference vertex coordinates
     tris: np.ndarray  # (ne, 3) vertex numbers
     region: np.ndarray  # (ne,) index into regions
@@ -84,7 +84,7 @@ def vertex_values(mesh: ngs.Mesh, cf: ngs.CoefficientFunction, X: np.ndarray,
 
 def deformed_quality(mesh: ngs.Mesh, u: ngs.CoefficientFunction) -> np.ndarray:
     """:func:`triangle_quality` of the deformed straight triangles ``X_i + u(X_i)``."""
-    top = _topology(mesh)
+    top = topology(mesh)
     return triangle_quality(top.X + vertex_values(mesh, u, top.X), top.tris)
 
 
@@ -101,7 +101,7 @@ def rezone(
     """A reference mesh of ``mesh``'s domain that ``X + u(X)`` maps onto a fresh netgen mesh
     of the deformed domain (sizes ``h``, ``h_corner`` at the images of ``corners``, ``h_rim``
     at the images of the reference points ``rim_points`` (n, 2))."""
-    top = _topology(mesh)
+    top = topology(mesh)
     U = vertex_values(mesh, u, top.X)
     if not np.all(np.isfinite(U)):
         raise ConvergenceError("rezoning: the displacement is not finite at every vertex")
@@ -196,7 +196,7 @@ def rezone(
 
 
 # --- helpers ----------------------------------------------------------------------------
-def _topology(mesh: ngs.Mesh) -> _Topology:
+def topology(mesh: ngs.Mesh) -> Topology:
     if mesh.dim != 2:
         raise ValueError("rezoning is implemented for 2D meshes")
     X = np.array([v.point for v in mesh.vertices])[:, :2]
@@ -207,7 +207,7 @@ def _topology(mesh: ngs.Mesh) -> _Topology:
     names = list(mesh.GetMaterials())
     unique = list(dict.fromkeys(names))
     remap = np.array([unique.index(n) for n in names])
-    return _Topology(X, np.array(tris), remap[np.array(region)], unique)
+    return Topology(X, np.array(tris), remap[np.array(region)], unique)
 
 
 def _nearest_vertices(X: np.ndarray, points: Sequence[tuple[float, float]]) -> np.ndarray:
@@ -217,7 +217,7 @@ def _nearest_vertices(X: np.ndarray, points: Sequence[tuple[float, float]]) -> n
     return np.unique(idx)
 
 
-def _chains(mesh: ngs.Mesh, top: _Topology, corners: set[int]
+def _chains(mesh: ngs.Mesh, top: Topology, corners: set[int]
             ) -> list[tuple[str, list[int], int, int]]:
     """Feature curves of the mesh (boundary, and edges between regions) as vertex chains
     ``(label, vertices, left domain, right domain)`` (domains 1-based, 0 outside), broken
@@ -271,7 +271,7 @@ def _chains(mesh: ngs.Mesh, top: _Topology, corners: set[int]
     return chains
 
 
-def _sides(top: _Topology, a: int, b: int, ts: list[int]) -> tuple[int, int]:
+def _sides(top: Topology, a: int, b: int, ts: list[int]) -> tuple[int, int]:
     """Domains (region + 1, 0 outside) left and right of the directed edge ``a -> b``."""
     left = right = 0
     d = top.X[b] - top.X[a]
@@ -310,7 +310,7 @@ def _at(poly: np.ndarray, t: np.ndarray) -> np.ndarray:
     return (1 - s) * poly[k] + s * poly[k + 1]
 
 
-def _pull_back(mesh: ngs.Mesh, u: ngs.CoefficientFunction, top: _Topology, x: np.ndarray,
+def _pull_back(mesh: ngs.Mesh, u: ngs.CoefficientFunction, top: Topology, x: np.ndarray,
                x_new: np.ndarray, iterations: int = 8) -> np.ndarray:
     """``X`` with ``X + u(X) = x_new``: start from the deformed straight triangles'
     barycentric map, then Newton with ``F = I + grad u``."""

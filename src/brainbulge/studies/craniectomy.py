@@ -399,7 +399,7 @@ def attach_study_meshes(out_dir: Path, scenarios: list[dict[str, Any]]) -> list[
     ``coarse_tets``, ``coarse_mesh`` (built once at that size, unrefined: with ``coarse_tets =
     tets / 8**refine`` the Netgen mesh that the fine one refines)."""
     if not scenarios[0].get("mesh"):  # the defaults of the requested size, for all
-        scenarios = [_with_size_defaults(sc) for sc in scenarios]
+        scenarios = [with_size_defaults(sc) for sc in scenarios]
     common = scenarios[0]
     mesh = prepare_study_mesh(out_dir, common)
     shared: dict[str, Any] = {"mesh": str(mesh)}
@@ -410,7 +410,7 @@ def attach_study_meshes(out_dir: Path, scenarios: list[dict[str, Any]]) -> list[
     return [{**{k: v for k, v in sc.items() if k not in drop}, **shared} for sc in scenarios]
 
 
-def _with_size_defaults(scenario: dict[str, Any]) -> dict[str, Any]:
+def with_size_defaults(scenario: dict[str, Any]) -> dict[str, Any]:
     """``scenario`` with ``refine``, ``coarse_tets`` and ``linear_solver`` of its size
     (:func:`~brainbulge.model.brain.size_defaults`) where it does not give them."""
     coarse = scenario.get("coarse_tets")

@@ -15,7 +15,7 @@ import pytest
 
 from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 from brainbulge.solver import SolverOptions, mixed
-from brainbulge.solver.fast.hotspot import HotspotRelaxation, _LocalProblem
+from brainbulge.solver.fast.hotspot import HotspotRelaxation, LocalProblem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from contact_cases import A, _capped_ball
@@ -79,18 +79,9 @@ def test_relax_returns_a_displaced_vertex_to_equilibrium(state) -> None:
     assert new == pytest.approx(solver.scaled_norm(solver.res.FV().NumPy()))
 
 
-def _local_problem(form, solver, v: int) -> _LocalProblem:
+def _local_problem(form, solver, v: int) -> LocalProblem:
     """The local problem of the patch ``v`` + one ring, its active contact points included."""
-    relaxation = HotspotRelaxation(solver)
-    relaxation.hotspot(solver.residual(form.gfu.vec))
-    els, regions, dof_vertex, incidence, point_vertex, free_full = relaxation._maps
-    patch = np.zeros(form.mesh.nv, dtype=bool)
-    patch[els[incidence[:, [v]].toarray().ravel() > 0].ravel()] = True
-    elements = np.flatnonzero(incidence[:, np.flatnonzero(patch)].sum(axis=1).A1 > 0)
-    contacts = [(pc, np.flatnonzero(pc.active(solver.contact.c_active) & (pv >= 0)
-                                    & patch[np.maximum(pv, 0)]))
-                for pc, pv in zip(form.point_contacts, point_vertex, strict=True)]
-    return _LocalProblem(solver, elements, regions, patch, dof_vertex, free_full, contacts)
+    return HotspotRelaxation(solver, rings=1).local_problem(np.array([v]))
 
 
 @pytest.mark.parametrize("where", ["interior", "on the skull"])
@@ -170,7 +161,7 @@ def test_a_local_result_that_raises_the_residual_is_not_kept(state, monkeypatch)
         X[self.dofs] += 0.05
         return 1
 
-    monkeypatch.setattr(_LocalProblem, "solve", overshoot)
+    monkeypatch.setattr(LocalProblem, "solve", overshoot)
     relaxation = HotspotRelaxation(solver)
     assert relaxation.relax(x, norm) == pytest.approx(norm, rel=1e-12)
     assert not relaxation.records[-1].kept

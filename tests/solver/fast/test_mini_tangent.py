@@ -15,7 +15,7 @@ from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
-from brainbulge.solver.fast.mini_tangent import MiniTangent, _hessian, applies
+from brainbulge.solver.fast.mini_tangent import MiniTangent, applies, hessian
 
 SOFT = MooneyRivlin(0.03, 33.3)
 STIFF = MooneyRivlin(0.28, 333.0)
@@ -44,7 +44,7 @@ def test_hessian_is_the_derivative_of_the_stress(m: MooneyRivlin) -> None:
         assert np.linalg.det(F) > 0
         p = float(rng.standard_normal()) * 10
         A, H = np.empty((9, 9)), np.empty((3, 3))
-        _hessian(F, p, m.c1, m.c2, A, H)
+        hessian(F, p, m.c1, m.c2, A, H)
         assert np.allclose(H, np.linalg.det(F) * np.linalg.inv(F).T, rtol=1e-13, atol=1e-14)
         h = 1e-6
         fd = np.empty((9, 9))

@@ -10,12 +10,12 @@ import scipy.sparse as sp
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
-from brainbulge.solver.linear.direct import PardisoSolver
+from brainbulge.solver.linear.direct import PardisoSolver, pattern_reusing_pardiso
 from inclusion_cases import _inclusion_problem
 
 
 class _Wrapped:
-    """A PARDISO solver object passed through (tests replace one method)."""
+    """A PARDISO factorisation passed through (tests replace one method)."""
 
     def __init__(self, inner) -> None:
         object.__setattr__(self, "inner", inner)
@@ -24,8 +24,21 @@ class _Wrapped:
         return getattr(self.inner, name)
 
     def __setattr__(self, name, value) -> None:
-        setattr(self.inner, name, value)
+        if name in self.__dict__:  # the wrapper's own flags
+            object.__setattr__(self, name, value)
+        else:
+            setattr(self.inner, name, value)
 
+
+class _Broken(_Wrapped):
+    """A factorisation whose solutions are 3x too large while ``broken``."""
+
+    def __init__(self, inner) -> None:
+        super().__init__(inner)
+        object.__setattr__(self, "broken", True)
+
+    def solve(self, A, b):
+        return (3.0 if self.broken else 1.0) * self.inner.solve(A, b)
 
 
 def test_direct_solver_redoes_a_stale_analysis_before_falling_back_to_lu(swollen) -> None:
@@ -37,21 +50,20 @@ def test_direct_solver_redoes_a_stale_analysis_before_falling_back_to_lu(swollen
 
     class Stale(_Wrapped):  # factors on a reused analysis give 3x too large solutions
         def factorize(self, A):
-            object.__setattr__(self, "stale", self.inner._analysed)
+            object.__setattr__(self, "stale", self.inner.analysed)
             self.inner.factorize(A)
 
         def solve(self, A, b):
             return (3.0 if self.stale else 1.0) * self.inner.solve(A, b)
 
-    solver = PardisoSolver()
-    solver._symmetric = Stale(solver._symmetric)
+    symmetric = Stale(pattern_reusing_pardiso(mtype=-2))
+    solver = PardisoSolver(symmetric=symmetric)
     solver.solve(K, r)
-    assert solver._symmetric.reanalyses == 0
+    assert symmetric.reanalyses == 0 and symmetric.analyses == 1
     K2 = (3.0 * K).tocsr()  # the same pattern, other values
     x = solver.solve(K2, r)
     assert np.linalg.norm(K2 @ x - r) <= 1e-9 * np.linalg.norm(r)
-    assert solver._symmetric.reanalyses == 1 and solver.lu_solves == 0
-
+    assert symmetric.reanalyses == 1 and symmetric.analyses == 2 and solver.lu_solves == 0
 
 
 def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -> None:
@@ -59,51 +71,38 @@ def test_direct_solver_falls_back_to_lu_when_the_symmetric_mode_fails(swollen) -
     brain) is replaced by unsymmetric LU, for the rest of the run after two misses in a row;
     a matrix neither mode solves raises."""
     _, _, K, r = swollen
-
-    class Broken(_Wrapped):  # a factorisation whose solutions are 3x too large
-        def solve(self, A, b):
-            return 3.0 * self.inner.solve(A, b)
-
-    solver = PardisoSolver()
-    good = solver._symmetric
-    solver._symmetric = Broken(good)
+    symmetric = _Broken(pattern_reusing_pardiso(mtype=-2))
+    general = _Broken(pattern_reusing_pardiso(mtype=11))
+    general.broken = False
+    solver = PardisoSolver(symmetric=symmetric, general=general)
     x = solver.solve(K, r)
     assert np.linalg.norm(K @ x - r) <= 1e-9 * np.linalg.norm(r)
-    assert solver.lu_solves == 1 and not solver._lu_only  # one miss: LU for that matrix
-    solver._symmetric = good
+    assert solver.lu_solves == 1 and not solver.lu_only  # one miss: LU for that matrix
+    symmetric.broken = False
     solver.solve(K, r)
     assert solver.lu_solves == 1  # the symmetric mode again
-    solver._symmetric = Broken(good)
+    symmetric.broken = True
     solver.solve(K, r)
     solver.solve(K, r)
-    assert solver._lu_only and solver.lu_solves == 3  # two misses in a row: LU from now on
-    solver._symmetric = good
+    assert solver.lu_only and solver.lu_solves == 3  # two misses in a row: LU from now on
+    symmetric.broken = False
     solver.solve(K, r)
     assert solver.lu_solves == 4
-    solver._general = Broken(solver._general)
+    general.broken = True
     with pytest.raises(ConvergenceError, match="lost accuracy"):
         solver.solve(K, r)
 
 
-
-def test_direct_solver_analyses_a_sparsity_pattern_once(swollen, monkeypatch) -> None:
+def test_direct_solver_analyses_a_sparsity_pattern_once(swollen) -> None:
     """Tangents on a known pattern (or a subset of it: a smaller active set, dropped zeros)
     are factorised without a new symbolic analysis (PARDISO phase 22, not 12), and solved
     as accurately as with one; a new nonzero position brings a new analysis."""
     _, _, K, r = swollen
-    solver = PardisoSolver()
-    phases: list[int] = []
-    inner = solver._symmetric
-    original = type(inner)._call_pardiso
-
-    def spy(self, A, b):
-        phases.append(self.phase)
-        return original(self, A, b)
-
-    monkeypatch.setattr(type(inner), "_call_pardiso", spy)
+    symmetric = pattern_reusing_pardiso(mtype=-2)
+    solver = PardisoSolver(symmetric=symmetric)
     K = K.tocsr()
     x = solver.solve(K, r)
-    assert 12 in phases
+    assert symmetric.analyses == 1
     K2 = K.copy()
     K2.data = K2.data * (1 + 0.1 * np.cos(np.arange(K2.nnz)))  # new values, same pattern
     K2 = 0.5 * (K2 + K2.T)
@@ -113,18 +112,16 @@ def test_direct_solver_analyses_a_sparsity_pattern_once(swollen, monkeypatch) ->
     K2 = (K2 - K2.multiply((drop + drop.T) > 0)).tocsr()
     K2.eliminate_zeros()
     assert K2.nnz < K.nnz
-    phases.clear()
     x2 = solver.solve(K2, r)
-    assert 22 in phases and 12 not in phases
+    assert symmetric.analyses == 1 and symmetric.reanalyses == 0  # numeric phase 22 only
     assert np.linalg.norm(K2 @ x2 - r) <= 1e-9 * np.linalg.norm(r)
     assert np.linalg.norm(x2 - x) > 1e-6 * np.linalg.norm(x)  # another matrix, solved anew
     n = K.shape[0]
     K3 = (K + sp.coo_matrix(([1e-3, 1e-3], ([0, n - 1], [n - 1, 0])), shape=K.shape)).tocsr()
-    phases.clear()
     x3 = solver.solve(K3, r)
-    assert 12 in phases  # the new entries (0, n-1) need a new analysis
+    assert symmetric.analyses == 2  # the new entries (0, n-1) need a new analysis
     assert np.linalg.norm(K3 @ x3 - r) <= 1e-9 * np.linalg.norm(r)
-
+    assert solver.lu_solves == 0
 
 
 def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None:

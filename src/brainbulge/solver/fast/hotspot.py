@@ -135,23 +135,27 @@ class HotspotRelaxation:
         return top[:k]
 
     # --- the local solve ------------------------------------------------------------------
-    def relax(self, x: ngs.BaseVector, norm: float) -> float:
-        """Solve the hotspot's equations at ``x`` (in place) when there is one; returns the
-        global scaled residual norm at the (kept or restored) state, ``self.solver.res``
-        holding its residual."""
+    def active_points(self) -> list[np.ndarray]:
+        """Per point contact: its points that keep ``g = 0`` in a local solve (active or
+        forced, and on a vertex)."""
         s = self.solver
-        hot = self.hotspot(s.res.FV().NumPy())
-        if hot is None:
-            return norm
-        els, regions, dof_vertex, incidence, point_vertex, free_full = self._maps
-        pcs = s.form.point_contacts
-        # contact points: active (or forced) ones keep g = 0 in the local solve, with their
-        # multiplier as an unknown; a point releasing its pressure holds its vertex fixed
+        point_vertex = (self._maps or self._build_maps())[4]
+        return [(pc.active(s.contact.c_active) | forced) & (pv >= 0)
+                for pc, pv, forced in zip(s.form.point_contacts, point_vertex,
+                                          s.contact.forced, strict=True)]
+
+    def local_problem(self, hot: np.ndarray, active: list[np.ndarray] | None = None
+                      ) -> LocalProblem | None:
+        """The local problem of the vertices ``hot`` and ``rings`` rings of elements around
+        them; its contact points are the ``active`` ones (:meth:`active_points` by default)
+        of the patch. A point releasing its pressure (``lambda != 0``, not active) holds its
+        vertex fixed. ``None`` when no vertex of ``hot`` is left free."""
+        els, regions, dof_vertex, incidence, point_vertex, free_full = (
+            self._maps or self._build_maps())
+        pcs = self.solver.form.point_contacts
+        active = self.active_points() if active is None else active
         held = np.zeros(incidence.shape[1], dtype=bool)
-        active = []
-        for pc, pv, forced in zip(pcs, point_vertex, s.contact.forced, strict=True):
-            act = (pc.active(s.contact.c_active) | forced) & (pv >= 0)
-            active.append(act)
+        for pc, pv, act in zip(pcs, point_vertex, active, strict=True):
             held[pv[(pc.lam != 0) & ~act & (pv >= 0)]] = True
         patch = np.zeros(incidence.shape[1], dtype=bool)
         patch[hot] = True
@@ -161,11 +165,28 @@ class HotspotRelaxation:
         patch &= ~held
         self.last_patch = patch
         if not patch[hot].any():
-            return norm
+            return None
         elements = np.flatnonzero(incidence[:, np.flatnonzero(patch)].sum(axis=1).A1 > 0)
         contacts = [(pc, np.flatnonzero(act & patch[np.maximum(pv, 0)]))
                     for pc, pv, act in zip(pcs, point_vertex, active, strict=True)]
-        problem = _LocalProblem(s, elements, regions, patch, dof_vertex, free_full, contacts)
+        return LocalProblem(self.solver, elements, regions, patch, dof_vertex, free_full,
+                            contacts)
+
+    def relax(self, x: ngs.BaseVector, norm: float) -> float:
+        """Solve the hotspot's equations at ``x`` (in place) when there is one; returns the
+        global scaled residual norm at the (kept or restored) state, ``self.solver.res``
+        holding its residual."""
+        s = self.solver
+        hot = self.hotspot(s.res.FV().NumPy())
+        if hot is None:
+            return norm
+        pcs = s.form.point_contacts
+        point_vertex = self._maps[4]
+        active = self.active_points()
+        problem = self.local_problem(hot, active)
+        if problem is None:
+            return norm
+        patch = problem.patch
         self.last_dofs = problem.dofs
         X = x.FV().NumPy()
         x_saved = X.copy()
@@ -180,7 +201,7 @@ class HotspotRelaxation:
         self.records.append(RelaxationRecord(len(hot), int(patch.sum()), its, norm, new, kept))
         log.debug("    hotspot: %d vertices, patch of %d (%d tets, %d contact points), %d local "
                   "Newton iterations: |R| %.3e -> %.3e%s", len(hot), int(patch.sum()),
-                  len(elements), sum(len(p) for _, p in contacts), its, norm, new,
+                  len(problem.items), sum(len(c[1]) for c in problem.contacts), its, norm, new,
                   "" if kept else ", not kept")
         if kept:
             return new
@@ -193,7 +214,7 @@ class HotspotRelaxation:
         return norm
 
 
-class _LocalProblem:
+class LocalProblem:
     """The equations of a patch's DOFs, assembled from its elements' matrices, and the
     constraints ``g_i = 0`` of its active contact points (multipliers ``lambda_i``)::
 
@@ -208,6 +229,7 @@ class _LocalProblem:
         form = solver.form
         mesh, fes = form.mesh, form.fes
         self.solver = solver
+        self.patch = patch  # its vertices
         self.items = []  # per element: fe, trafo, dofs, integrators, local rows (-1: fixed)
         dofs_all = []
         n_regions = len(mesh.GetMaterials())

@@ -64,7 +64,7 @@ QUAD_POINTS = np.array([[_A, _B, _B, _B], [_B, _A, _B, _B], [_B, _B, _A, _B], [_
 
 
 @numba.njit(cache=True, inline="always")
-def _hessian(F, p, c1, c2, A, H):  # noqa: ANN001, ANN202 - Numba kernel
+def hessian(F, p, c1, c2, A, H):  # noqa: ANN001, ANN202 - Numba kernel
     """``A = d2W/dF2`` as a 9x9 matrix (row ``3 i + j``, column ``3 k + l``) and
     ``H = cof F = dJ/dF`` for one integration point (the closed form of the module)."""
     H[0, 0] = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
@@ -196,7 +196,7 @@ def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa
                     s += U[a, i] * g[a, j]
                 F[i, j] = s
         p = L[0] * P[0] + L[1] * P[1] + L[2] * P[2] + L[3] * P[3]
-        _hessian(F, p, c1[e], c2[e], A, H)
+        hessian(F, p, c1[e], c2[e], A, H)
         for r in range(9):  # T1[ij, b, k] = sum_l A[ij, kl] dN_b/dX_l
             for bb in range(5):
                 for k in range(3):

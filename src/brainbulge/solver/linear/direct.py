@@ -19,9 +19,11 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class DirectStats:
-    """A direct solver iterates not: no iterations."""
+    """A direct solver iterates not (no ``iterations``); it counts its matrices solved by the
+    LU fallback."""
 
     iterations: list[int] = field(default_factory=list)
+    lu_solves: int = 0
 
 
 class PardisoSolver:
@@ -42,13 +44,24 @@ class PardisoSolver:
 
     LU_AFTER = 2
 
-    def __init__(self) -> None:
-        self._symmetric = _pattern_reusing_pardiso(mtype=-2)
-        self._general = _pattern_reusing_pardiso(mtype=11)
+    def __init__(self, symmetric=None, general=None) -> None:
+        """``symmetric`` and ``general``: the two factorisations, by default
+        ``pattern_reusing_pardiso(-2)`` and ``(11)`` (any object with their methods)."""
+        self.symmetric = symmetric or pattern_reusing_pardiso(mtype=-2)
+        self.general = general or pattern_reusing_pardiso(mtype=11)
         self._lu_only = False  # after LU_AFTER failures of the symmetric mode in a row
         self._misses = 0  # symmetric failures in a row
-        self.lu_solves = 0  # matrices solved by the fallback
         self.stats = DirectStats()
+
+    @property
+    def lu_only(self) -> bool:
+        """Whether the symmetric mode is given up for the rest of the run."""
+        return self._lu_only
+
+    @property
+    def lu_solves(self) -> int:
+        """Matrices solved by the LU fallback."""
+        return self.stats.lu_solves
 
     def solve(self, K: sp.csr_matrix, r: np.ndarray, rtol: float | None = None,
               x0: np.ndarray | None = None) -> np.ndarray:
@@ -57,15 +70,15 @@ class PardisoSolver:
         norm_r = max(float(np.linalg.norm(r)), 1e-300)
         residual = np.inf
         if not self._lu_only:
-            x, residual = _refined(self._symmetric, sp.triu(K, format="csr"), K, r, norm_r)
+            x, residual = _refined(self.symmetric, sp.triu(K, format="csr"), K, r, norm_r)
             self._misses = 0 if residual <= 1e-6 else self._misses + 1
             if self._misses:
                 self._lu_only = self._misses >= self.LU_AFTER
                 log.debug("PARDISO symmetric mode: relative residual %.1e; unsymmetric LU "
                           "%s", residual, "from now on" if self._lu_only else "for this one")
         if not residual <= 1e-6:  # also NaN
-            self.lu_solves += 1
-            x, residual = _refined(self._general, K, K, r, norm_r)
+            self.stats.lu_solves += 1
+            x, residual = _refined(self.general, K, K, r, norm_r)
         if not residual <= 1e-6:
             raise ConvergenceError(
                 f"the direct solver lost accuracy (relative residual {residual:.1e}); the "
@@ -78,9 +91,9 @@ class PardisoSolver:
 
     def release(self) -> None:
         """Free PARDISO's memory, the symbolic analysis too (a later solve redoes it)."""
-        for solver in (self._symmetric, self._general):
+        for solver in (self.symmetric, self.general):
             solver.free_memory(everything=True)
-            solver._analysed = False
+            solver.forget_analysis()
 
 
 def _refined(solver, A: sp.csr_matrix, K: sp.csr_matrix, r: np.ndarray, norm_r: float
@@ -95,7 +108,7 @@ def _refined(solver, A: sp.csr_matrix, K: sp.csr_matrix, r: np.ndarray, norm_r: 
     miss is retried once with a fresh analysis before it counts as one."""
     A = solver.on_pattern(A)
     while True:
-        reused = solver._analysed
+        reused = solver.analysed
         solver.factorize(A)
         x = solver.solve(A, r)
         for _ in range(3):
@@ -107,11 +120,11 @@ def _refined(solver, A: sp.csr_matrix, K: sp.csr_matrix, r: np.ndarray, norm_r: 
         residual = float(np.linalg.norm(r - K @ x) / norm_r)
         if residual <= 1e-6 or not reused:
             return x, residual
-        solver._analysed = False
+        solver.forget_analysis()
         solver.reanalyses += 1
 
 
-def _pattern_reusing_pardiso(mtype: int):
+def pattern_reusing_pardiso(mtype: int):
     """A ``pypardiso`` solver that redoes PARDISO's symbolic analysis (fill-reducing ordering,
     phase 11) only when a matrix brings new nonzero positions, and otherwise factorises
     numerically (phase 22). Matrices are put on the union of the sparsity patterns seen so
@@ -126,8 +139,13 @@ def _pattern_reusing_pardiso(mtype: int):
     class PatternReusingPardiso(pypardiso.PyPardisoSolver):
         _union: sp.csr_matrix | None = None  # the union pattern (values unused)
         _keys: np.ndarray | None = None  # its entries as row * n + col, ascending
-        _analysed = False
-        reanalyses = 0  # fresh analyses after a miss on a reused one (see _refined)
+        analysed = False  # whether the union pattern's symbolic analysis is current
+        analyses = 0  # symbolic analyses (PARDISO phase 12) done
+        reanalyses = 0  # of them, fresh ones after a miss on a reused one (see _refined)
+
+        def forget_analysis(self) -> None:
+            """The next factorisation analyses the pattern anew."""
+            self.analysed = False
 
         def on_pattern(self, A: sp.csr_matrix) -> sp.csr_matrix:
             """``A`` on the union pattern, which grows (and is analysed anew) if needed."""
@@ -148,19 +166,20 @@ def _pattern_reusing_pardiso(mtype: int):
             rows, cols = np.divmod(keys, n)
             self._union = sp.csr_matrix((np.ones(len(keys)), (rows, cols)), shape=A.shape)
             self._keys = keys
-            self._analysed = False
+            self.analysed = False
             return self.on_pattern(A)
 
         def factorize(self, A: sp.csr_matrix) -> None:
             """Factorise ``A``, a matrix returned by :meth:`on_pattern`."""
             self._check_A(A)
-            if not self._analysed:
+            if not self.analysed:
                 self.free_memory(everything=True)
+                self.analyses += 1
             self.factorized_A = (A.copy() if A.nnz <= self.size_limit_storage
                                  else self._hash_csr_matrix(A))  # as pypardiso does
-            self.set_phase(22 if self._analysed else 12)
+            self.set_phase(22 if self.analysed else 12)
             self._call_pardiso(A, np.zeros((A.shape[0], 1)))
-            self._analysed = True
+            self.analysed = True
 
     solver = PatternReusingPardiso(mtype=mtype)
     if mtype == -2:

@@ -56,12 +56,14 @@ class _Pattern:
         self.shape: tuple[int, int] | None = None
         self.indptr = _frozen(np.zeros(0, dtype=np.int64))
         self.indices = _frozen(np.zeros(0, dtype=np.int64))
+        self.comparisons = 0  # matrices compared entry by entry (not recognised in O(1))
 
     def matches(self, K: sp.csr_matrix) -> bool:
         if K.shape != self.shape:
             return False
         if _same_array(K.indices, self.indices) and _same_array(K.indptr, self.indptr):
             return True
+        self.comparisons += 1
         same = (len(K.indices) == len(self.indices) and np.array_equal(K.indptr, self.indptr)
                 and np.array_equal(K.indices, self.indices))
         if same and not (K.indices.flags.writeable or K.indptr.flags.writeable):
@@ -92,7 +94,12 @@ class PatternGather:
         self._take = np.zeros(0, dtype=np.int64)
         self._indptr = self._indices = np.zeros(0, dtype=np.int64)
         self._shape: tuple[int, int] = (0, 0)
-        self.plans = 0  # how many patterns were analysed (a test's handle)
+        self.plans = 0  # how many patterns were analysed
+
+    @property
+    def comparisons(self) -> int:
+        """How many matrices were compared with the plan's pattern entry by entry."""
+        return self._pattern.comparisons
 
     def __call__(self, K: sp.spmatrix) -> sp.csr_matrix:
         K = canonical(K)
