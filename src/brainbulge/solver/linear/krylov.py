@@ -31,10 +31,10 @@ finest level's matrix and smoother are refreshed, ``S~`` once per load step
 failed solve, or on request (``refresh()``). Every solve checks the true residual
 ``|rhs - K x| / |rhs|``. When GMRES misses ``rtol`` the matrix goes to the ``fallback``
 solver if there is one (PARDISO up to :data:`DIRECT_FALLBACK_DOFS` unknowns), else
-:class:`ConvergenceError`. With a fallback, GMRES stops after :data:`FALLBACK_BUDGET`
-iterations: on the 111k-tet brain under an 80 mm flap (planner), the tangents past load 0.5
-took 1,000 GMRES iterations for a relative residual of 3e-4 to 0.1 (55 s each), where
-PARDISO solves one in 10-30 s; the tangents GMRES does solve there take 35-60.
+:class:`ConvergenceError`. With a fallback, GMRES stops after ``stall_factor`` times the
+iterations of the reference solve (the first after a set-up): on the 111k-tet brain under an
+80 mm flap (planner), the tangents past load 0.5 took 1,000 GMRES iterations for a relative
+residual of 3e-4 to 0.1 (55 s each), where PARDISO solves one in 10-30 s.
 
 GMRES is written here rather than taken from SciPy: SciPy's ``gmres`` preconditions from the
 left, so it stops on the preconditioned residual (it reported success at a true relative
@@ -72,8 +72,8 @@ SCHUR_DROP = 0.05
 #: Largest number of unknowns for which a Krylov solver gets a PARDISO fallback (~2 GB of
 #: factors at 1M unknowns, ~220k tets of MINI; 805 MB measured at 111k tets).
 DIRECT_FALLBACK_DOFS = 1_000_000
-#: GMRES's iteration budget per solve when a fallback takes over beyond it.
-FALLBACK_BUDGET = 300
+#: The smallest GMRES budget with a fallback (iterations).
+MIN_BUDGET = 200
 
 
 @dataclass
@@ -109,9 +109,10 @@ class BlockKrylovSolver:
         refresh_factor: rebuild the AMG when a solve takes more than this times the
             iterations of the first solve after the last setup.
         amg: extra keyword arguments for ``pyamg.smoothed_aggregation_solver`` (both blocks).
-        fallback: a solver for the matrices GMRES misses ``rtol`` on within
-            ``min(maxiter, FALLBACK_BUDGET)`` iterations (e.g. a
+        fallback: a solver for the matrices GMRES misses ``rtol`` on (e.g. a
             :class:`~brainbulge.solver.linear.direct.PardisoSolver`); ``None``: raise.
+        stall_factor: with a fallback, GMRES's budget is ``stall_factor`` times the
+            iterations of the first solve after the last set-up (at least ``MIN_BUDGET``).
 
     Attributes:
         amg_u: the cycle approximating ``A^-1`` (:class:`AMGCycle`, or
@@ -121,7 +122,7 @@ class BlockKrylovSolver:
 
     def __init__(self, is_u: np.ndarray, layout: DisplacementLayout, rtol: float = 1e-8,
                  maxiter: int = 1000, restart: int = 100, refresh_factor: float = 1.5,
-                 amg: dict | None = None, fallback=None) -> None:
+                 amg: dict | None = None, fallback=None, stall_factor: float = 5.0) -> None:
         self.is_u = np.asarray(is_u, dtype=bool)
         self.iu = np.flatnonzero(self.is_u)
         self.ip = np.flatnonzero(~self.is_u)
@@ -133,9 +134,11 @@ class BlockKrylovSolver:
         self.restart = restart
         self.refresh_factor = refresh_factor
         self.fallback = fallback
+        self.stall_factor = stall_factor
         self._schur_stale = True  # S~ to be rebuilt at the next solve
         self.stats = KrylovStats()
         self._ref_iterations: int | None = None
+        self._last_ref_iterations: int | None = None
         self._refresh_requested = False
         self._ready = False
         self._block_plans: tuple[PatternGather, ...] = ()
@@ -279,12 +282,17 @@ class BlockKrylovSolver:
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
         A, Bt, C = self._update(K)
-        budget = self.maxiter if self.fallback is None else min(self.maxiter, FALLBACK_BUDGET)
+        budget = self.maxiter
+        ref = self._ref_iterations or self._last_ref_iterations
+        if self.fallback is not None and ref is not None:
+            budget = min(budget, max(MIN_BUDGET, int(self.stall_factor * ref)))
         with serial_openblas():  # small BLAS-2 work: threads cost more than they give
             x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0,
                                        budget)
         if self._ref_iterations is None:
             self._ref_iterations = max(its, 1)
+            if res <= rtol:  # kept across set-ups for the budget
+                self._last_ref_iterations = self._ref_iterations
         elif its > self.refresh_factor * self._ref_iterations:
             log.debug("Krylov iterations %d > %.2g x %d: AMG refresh", its,
                       self.refresh_factor, self._ref_iterations)
