@@ -29,12 +29,7 @@ finest level's matrix and smoother are refreshed, ``S~`` once per load step
 (:meth:`BlockKrylovSolver.new_load_step`); everything is rebuilt when a solve takes more than
 ``refresh_factor`` times the iterations of the first solve after the last set-up, after a
 failed solve, or on request (``refresh()``). Every solve checks the true residual
-``|rhs - K x| / |rhs|``. When GMRES misses ``rtol`` the matrix goes to the ``fallback``
-solver if there is one (PARDISO up to :data:`DIRECT_FALLBACK_DOFS` unknowns), else
-:class:`ConvergenceError`. With a fallback, GMRES stops after ``stall_factor`` times the
-iterations of the reference solve (the first after a set-up): on the 111k-tet brain under an
-80 mm flap (planner), the tangents past load 0.5 took 1,000 GMRES iterations for a relative
-residual of 3e-4 to 0.1 (55 s each), where PARDISO solves one in 10-30 s.
+``|rhs - K x| / |rhs|`` and raises :class:`ConvergenceError` if it is above ``rtol``.
 
 GMRES is written here rather than taken from SciPy: SciPy's ``gmres`` preconditions from the
 left, so it stops on the preconditioned residual (it reported success at a true relative
@@ -54,7 +49,6 @@ import scipy.sparse as sp
 
 from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.solver.linear.amg import AMGCycle, HierarchicalTwoLevel
-from brainbulge.solver.linear.direct import PardisoSolver
 from brainbulge.solver.linear.layout import DisplacementLayout, displacement_layout, free_dofs
 from brainbulge.solver.linear.sparse_reuse import PatternGather
 from brainbulge.solver.threads import serial_openblas
@@ -69,12 +63,6 @@ log = logging.getLogger("brainbulge")
 # 481 GMRES iterations, 13 -> 10 Newton iterations, 129 -> 69 s linear solves.
 SCHUR_DROP = 0.05
 
-#: Largest number of unknowns for which a Krylov solver gets a PARDISO fallback (~2 GB of
-#: factors at 1M unknowns, ~220k tets of MINI; 805 MB measured at 111k tets).
-DIRECT_FALLBACK_DOFS = 1_000_000
-#: The smallest GMRES budget with a fallback (iterations).
-MIN_BUDGET = 200
-
 
 @dataclass
 class KrylovStats:
@@ -87,7 +75,6 @@ class KrylovStats:
     solve_time_s: float = 0.0
     iterations: list[int] = field(default_factory=list)
     residuals: list[float] = field(default_factory=list)
-    fallback_solves: int = 0  # matrices GMRES missed and the fallback solved
 
 
 class BlockKrylovSolver:
@@ -109,10 +96,6 @@ class BlockKrylovSolver:
         refresh_factor: rebuild the AMG when a solve takes more than this times the
             iterations of the first solve after the last setup.
         amg: extra keyword arguments for ``pyamg.smoothed_aggregation_solver`` (both blocks).
-        fallback: a solver for the matrices GMRES misses ``rtol`` on (e.g. a
-            :class:`~brainbulge.solver.linear.direct.PardisoSolver`); ``None``: raise.
-        stall_factor: with a fallback, GMRES's budget is ``stall_factor`` times the
-            iterations of the first solve after the last set-up (at least ``MIN_BUDGET``).
 
     Attributes:
         amg_u: the cycle approximating ``A^-1`` (:class:`AMGCycle`, or
@@ -122,7 +105,7 @@ class BlockKrylovSolver:
 
     def __init__(self, is_u: np.ndarray, layout: DisplacementLayout, rtol: float = 1e-8,
                  maxiter: int = 1000, restart: int = 100, refresh_factor: float = 1.5,
-                 amg: dict | None = None, fallback=None, stall_factor: float = 5.0) -> None:
+                 amg: dict | None = None) -> None:
         self.is_u = np.asarray(is_u, dtype=bool)
         self.iu = np.flatnonzero(self.is_u)
         self.ip = np.flatnonzero(~self.is_u)
@@ -133,12 +116,9 @@ class BlockKrylovSolver:
         self.maxiter = maxiter
         self.restart = restart
         self.refresh_factor = refresh_factor
-        self.fallback = fallback
-        self.stall_factor = stall_factor
         self._schur_stale = True  # S~ to be rebuilt at the next solve
         self.stats = KrylovStats()
         self._ref_iterations: int | None = None
-        self._last_ref_iterations: int | None = None
         self._refresh_requested = False
         self._ready = False
         self._block_plans: tuple[PatternGather, ...] = ()
@@ -157,14 +137,10 @@ class BlockKrylovSolver:
 
     @classmethod
     def from_form(cls, form, **options) -> BlockKrylovSolver:
-        """Everything the constructor needs, from a MINI or Taylor-Hood :class:`MixedForm`;
-        a PARDISO fallback up to :data:`DIRECT_FALLBACK_DOFS` free DOFs unless ``options``
-        give one."""
+        """Everything the constructor needs, from a MINI or Taylor-Hood :class:`MixedForm`."""
         free = free_dofs(form)
         rng = form.fes.Range(0)
         is_u = (free >= rng.start) & (free < rng.stop)
-        if "fallback" not in options and len(free) <= DIRECT_FALLBACK_DOFS:
-            options["fallback"] = PardisoSolver()
         return cls(is_u, displacement_layout(form, free), **options)
 
     # --- set-up and reuse ----------------------------------------------------------------
@@ -231,8 +207,6 @@ class BlockKrylovSolver:
         """Free the AMG hierarchies and the sparse plans (a later solve makes them again)."""
         self.amg_u.release()
         self.amg_p.release()
-        if self.fallback is not None:
-            self.fallback.release()
         self._block_plans, self._block_plans_rows = (), -1
         self._ready = False
 
@@ -282,17 +256,10 @@ class BlockKrylovSolver:
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
         A, Bt, C = self._update(K)
-        budget = self.maxiter
-        ref = self._ref_iterations or self._last_ref_iterations
-        if self.fallback is not None and ref is not None:
-            budget = min(budget, max(MIN_BUDGET, int(self.stall_factor * ref)))
         with serial_openblas():  # small BLAS-2 work: threads cost more than they give
-            x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0,
-                                       budget)
+            x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0)
         if self._ref_iterations is None:
             self._ref_iterations = max(its, 1)
-            if res <= rtol:  # kept across set-ups for the budget
-                self._last_ref_iterations = self._ref_iterations
         elif its > self.refresh_factor * self._ref_iterations:
             log.debug("Krylov iterations %d > %.2g x %d: AMG refresh", its,
                       self.refresh_factor, self._ref_iterations)
@@ -305,22 +272,14 @@ class BlockKrylovSolver:
         self.stats.solve_time_s += time.perf_counter() - t0
         if not res <= rtol:
             self._refresh_requested = True
-            if self.fallback is None:
-                raise ConvergenceError(
-                    f"GMRES reached a relative residual of {res:.2e} > {rtol:.1e} in "
-                    f"{its} iterations; raise maxiter or use the direct solver")
-            t1 = time.perf_counter()
-            x = self.fallback.solve(K, r)
-            self.stats.fallback_solves += 1
-            log.debug("    GMRES missed %.1e (%.1e after %d iterations): direct solve "
-                      "(%.1f s)", rtol, res, its, time.perf_counter() - t1)
+            raise ConvergenceError(
+                f"GMRES reached a relative residual of {res:.2e} > {rtol:.1e} in "
+                f"{its} iterations; raise maxiter or use the direct solver")
         return x
 
-    def _krylov(self, K, r: np.ndarray, rtol: float, M, x0: np.ndarray | None = None,
-                budget: int | None = None) -> tuple[np.ndarray, int, float]:
-        """Restarted Krylov on the true defect until the true residual meets ``rtol`` or
-        ``budget`` iterations (default ``maxiter``) are spent."""
-        budget = self.maxiter if budget is None else budget
+    def _krylov(self, K, r: np.ndarray, rtol: float, M,
+                x0: np.ndarray | None = None) -> tuple[np.ndarray, int, float]:
+        """Restarted Krylov on the true defect until the true residual meets ``rtol``."""
         r = np.asarray(r, dtype=float)
         norm_r = float(np.linalg.norm(r))
         x = np.zeros_like(r)
@@ -339,9 +298,9 @@ class BlockKrylovSolver:
                     return x, 0, res
             else:
                 defect, res = r, 1.0
-        while its < budget:
+        while its < self.maxiter:
             target = inner_rtol * norm_r / np.linalg.norm(defect)
-            dx, k, _ = _gmres(K, defect, M, target, budget - its, self.restart)
+            dx, k, _ = _gmres(K, defect, M, target, self.maxiter - its, self.restart)
             x += dx
             its += k
             defect = r - K @ x
