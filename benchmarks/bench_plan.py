@@ -1,9 +1,10 @@
 """Benchmark of the craniectomy planner: a (diameters x centres) plan on one shared mesh.
 
 Run ``python benchmarks/bench_plan.py [--tets 100000 | --mesh brain.npz] [--diameters 80 100
-120 140 160] [--centres 10] [--swell left] [--workers 2] [--out DIR]``: builds (or reads) the
-ICBM152 mesh, places the centres, runs the plan on a local Dask cluster (``--workers``) or
-``--scheduler serial``, and prints one row per plan (Newton iterations, warm start, solve s)
+120 140 160] [--centres 10] [--swell left] [--workers 2] [--edge-radius MM] [--out DIR]``:
+builds (or reads) the ICBM152 mesh, places the centres, runs the plan on a local Dask cluster
+(``--workers``) or ``--scheduler serial``, and prints one row per plan (Newton iterations,
+warm start, solve s)
 and the totals: plans run, wall time, time per plan, the recommendation. ``--cold`` runs
 every plan from ``Js = 1`` (no warm starts), for comparison.
 """
@@ -30,6 +31,8 @@ def main() -> None:
     ap.add_argument("--scheduler", default=None)
     ap.add_argument("--tolerance", type=float, default=1e-9)
     ap.add_argument("--cold", action="store_true", help="no warm starts")
+    ap.add_argument("--edge-radius", type=float, default=None,
+                    help="skull edge radius [mm] (default: the product's)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     configure_runtime()
@@ -43,8 +46,9 @@ def main() -> None:
     t0 = time.perf_counter()
     mesh = args.mesh or str(prepare_study_mesh(out, {"tets": args.tets}))
     t_mesh = time.perf_counter() - t0
+    radius = {} if args.edge_radius is None else {"edge_radius_mm": args.edge_radius}
     base = CraniectomyCase(flap="none", swell=args.swell, mesh=str(Path(mesh).resolve()),
-                           linear_solver="krylov", tolerance=args.tolerance)
+                           linear_solver="krylov", tolerance=args.tolerance, **radius)
     bm = planner.shared_mesh(base.mesh)
     centres = planner.centres_for(bm, args.swell, args.centres, None, base.superior_band())
     cases = planner.plan_cases(base, bm, centres, args.diameters)

@@ -26,6 +26,7 @@ MAX_CENTRES = 100
 
 
 def add_parser(sub: Any) -> None:
+    from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
     from brainbulge.results.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
 
     p = sub.add_parser("plan", help="search the flap's centre and size for the least damage",
@@ -61,6 +62,11 @@ def add_parser(sub: Any) -> None:
                    help="Newton's tolerance at full load (default 1e-9)")
     p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="krylov",
                    help="linear solver (default krylov: GMRES + AMG)")
+    p.add_argument("--skull-edge-radius", type=positive_float("--skull-edge-radius"),
+                   default=EDGE_RADIUS_MM,
+                   help="rounding radius of the skull's cut edge, in the bone outside the "
+                   f"opening [mm] (default {EDGE_RADIUS_MM:g}; small flaps converge faster "
+                   "with less, see docs/known-limits.md)")
     p.add_argument("--scheduler", default=None,
                    help="address of a running Dask scheduler (default: a local cluster); "
                    "'serial' runs in this process")
@@ -72,7 +78,8 @@ def add_parser(sub: Any) -> None:
 def common_config(args: argparse.Namespace) -> dict[str, Any]:
     """The options every plan shares (a :class:`CraniectomyCase` as a dict)."""
     config = {"swell": args.swell, "swelling": args.swelling, "steps": args.steps,
-              "tolerance": args.tolerance, "linear_solver": args.linear_solver}
+              "tolerance": args.tolerance, "linear_solver": args.linear_solver,
+              "edge_radius_mm": args.skull_edge_radius}
     if args.mesh is not None:
         config["mesh"] = args.mesh
     else:
