@@ -179,9 +179,10 @@ def expected_cost(scenario: dict[str, Any]) -> float:
     """Relative run time of a hemidisk scenario, for the order in which a study starts them
     (:func:`brainbulge.studies.runner.run_study`): the swelling sector's angle over the
     opening's, ``alpha / beta`` (1 for a disk). A large sector pushed through a narrow opening
-    folds the bulge over the opening's edges and takes the longest: in the sector study,
-    alpha 80 / beta 30 and alpha 60 / beta 30 (ratios 2-2.7) took 15-40 times the solve of
-    a case with a ratio below 1 (``python benchmarks/bench_hemidisk.py``)."""
+    folds the bulge over the opening's edges and takes the longest: in the sector study the
+    three slowest were alpha 80 / beta 30 (both contacts) and sliding alpha 60 / beta 30
+    (ratios 2-2.7), 80-290 s of solve against 2-12 s for each case with a ratio of at most 1
+    (``python benchmarks/bench_hemidisk.py``)."""
     alpha = scenario.get("alpha")
     if not alpha:
         return 1.0
