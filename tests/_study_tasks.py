@@ -16,6 +16,7 @@ from typing import Any
 def counting_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
     """Appends one line to ``<scenario_dir>/calls.txt`` per call (counts executions), writes a
     result file, fails when ``scenario["fail"]`` and sleeps ``scenario["sleep_s"]``."""
+    started = time.time()
     with open(scenario_dir / "calls.txt", "a", encoding="utf-8") as fh:
         fh.write(f"{os.getpid()}\n")
     time.sleep(scenario.get("sleep_s", 0.0))
@@ -24,7 +25,7 @@ def counting_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any
     x = scenario["x"]
     (scenario_dir / "result.json").write_text(json.dumps({"square": x * x}))
     threads = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "NGS_NUM_THREADS")}
-    return {"square": x * x, "pid": os.getpid(), "threads": threads}
+    return {"square": x * x, "pid": os.getpid(), "threads": threads, "started": started}
 
 
 def non_json_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:

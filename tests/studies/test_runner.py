@@ -186,3 +186,18 @@ def test_local_cluster_two_workers(tmp_path: Path, monkeypatch: pytest.MonkeyPat
         assert len(cluster.scheduler_info["workers"]) == 1
     assert rows2 == rows
     assert [tasks.calls(tmp_path / s["name"]) for s in scenarios] == [1, 1, 2, 1, 1, 1]
+
+
+def test_local_cluster_starts_the_costliest_first(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    src = Path(brainbulge.__file__).resolve().parents[1]
+    paths = [str(Path(tasks.__file__).parent), str(src), os.environ.get("PYTHONPATH", "")]
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in paths if p))
+    scenarios = _scenarios(5, sleep_s=0.05)
+    cost = {0: 2.0, 1: 0.5, 2: 9.0, 3: 1.0, 4: 3.0}
+    rows = run_study(scenarios, TASK, tmp_path, n_workers=1, progress=False,
+                     cost=lambda sc: cost[sc["x"]])
+
+    assert [r["name"] for r in rows] == [s["name"] for s in scenarios]  # the input order
+    started = sorted(rows, key=lambda r: r["started"])
+    assert [r["square"] for r in started] == [4, 16, 0, 9, 1]  # x = 2, 4, 0, 3, 1

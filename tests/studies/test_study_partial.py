@@ -125,3 +125,11 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
         sol = stopped(elsewhere)
         assert hd.stopped_message(case, sol) == sol.message
         assert sol.message.endswith(DIVERGENCE_ADVICE)
+
+
+def test_sector_study_starts_large_sectors_in_narrow_openings_first() -> None:
+    scenarios = hd.sector_scenarios() + hd.disk_scenarios()
+    ordered = sorted(scenarios, key=lambda sc: -hd.expected_cost(sc))
+    assert {sc["name"] for sc in ordered[:2]} == {"noslip_a80_b30", "sliding_a80_b30"}
+    assert {sc["name"] for sc in ordered[2:4]} == {"noslip_a60_b30", "sliding_a60_b30"}
+    assert hd.expected_cost(scenarios[-1]) == 1.0  # a disk

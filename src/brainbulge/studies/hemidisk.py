@@ -175,6 +175,20 @@ def disk_scenarios(**common: Any) -> list[dict[str, Any]]:
     ]
 
 
+def expected_cost(scenario: dict[str, Any]) -> float:
+    """Relative run time of a hemidisk scenario, for the order in which a study starts them
+    (:func:`brainbulge.studies.runner.run_study`): the swelling sector's angle over the
+    opening's, ``alpha / beta`` (1 for a disk). A large sector pushed through a narrow opening
+    folds the bulge over the opening's edges and takes the longest: in the sector study the
+    three slowest were alpha 80 / beta 30 (both contacts) and sliding alpha 60 / beta 30
+    (ratios 2-2.7), 80-290 s of solve against 2-12 s for each case with a ratio of at most 1
+    (``python benchmarks/bench_hemidisk.py``)."""
+    alpha = scenario.get("alpha")
+    if not alpha:
+        return 1.0
+    return float(alpha) / float(scenario.get("beta", HemidiskCase.beta))
+
+
 def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
     """Runner task: one hemidisk scenario (``name`` is the folder, the rest the case)."""
     config = {k: v for k, v in scenario.items() if k != "name"}

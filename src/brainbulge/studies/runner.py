@@ -56,7 +56,7 @@ import re
 import sys
 import traceback
 import uuid
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -281,6 +281,7 @@ def run_study(
     scheduler: str | None = None,
     n_workers: int | None = None,
     progress: bool = True,
+    cost: Callable[[dict[str, Any]], float] | None = None,
 ) -> list[dict[str, Any]]:
     """Run ``task(scenario, out_dir / name)`` for every scenario; return the summaries in input
     order.
@@ -311,6 +312,11 @@ def run_study(
     progress
         Show a tqdm progress bar over finished scenarios when stderr is a terminal; a log
         line (INFO) per finished scenario in any case.
+    cost
+        Expected relative run time of a scenario (any positive scale). On a cluster the
+        scenarios start in order of decreasing cost (Dask task priorities), so that the
+        longest do not start last and leave one worker busy while the others idle; serial
+        runs keep the input order.
 
     Raises
     ------
@@ -352,6 +358,8 @@ def run_study(
                 outcome = execute(task, dict(scenarios[i]), str(study.scenario_dir(i)))
                 _finish(study, bar, i, outcome)
         else:
+            if cost is not None:  # the longest first
+                pending = sorted(pending, key=lambda i: -float(cost(scenarios[i])))
             _run_distributed(study, bar, pending, scenarios, task, scheduler, n_workers)
     finally:
         bar.close()
@@ -412,7 +420,7 @@ def _run_distributed(
 
         index: dict[Any, int] = {}
         futures = []
-        for i in pending:
+        for rank, i in enumerate(pending):  # in this order: Dask's priority, higher first
             future = client.submit(
                 execute_on_worker,
                 task,
@@ -420,6 +428,7 @@ def _run_distributed(
                 str(study.scenario_dir(i)),
                 key=f"scenario-{study.scenarios[i]['name']}-{uuid.uuid4().hex[:8]}",
                 pure=False,
+                priority=len(pending) - rank,
             )
             index[future.key] = i
             futures.append(future)

@@ -37,7 +37,7 @@ def run_named_study(name: str, scenarios: list[dict], out: Path, scheduler: str 
     from brainbulge.studies.runner import run_study
 
     rows = run_study(scenarios, "brainbulge.studies.hemidisk:study_task", out,
-                     scheduler=scheduler, n_workers=workers)
+                     scheduler=scheduler, n_workers=workers, cost=hd.expected_cost)
     hd.write_study_table(rows, scenarios, out / "table.csv")
     if name == "hemidisk-sector":
         from brainbulge.studies.trends import write_sector_report
