@@ -231,13 +231,21 @@ def test_cli_mesh_on_user_labels(tmp_path, capsys) -> None:
     assert code == 2 and err.startswith("error: cannot read") and "\n" not in err
 
 
-def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
-    """``refinements=1``: Netgen's mesh at a size of 1/8, refined: its nodes come first and
-    unchanged, eight times the tets, the new surface nodes on the skull's inner surface, the
-    tissue volumes those of the image as on a mesh built directly."""
+@pytest.fixture(scope="module")
+def coarse_and_refined(synthetic_image):
+    """Netgen's mesh at 4k target tets, and the 32k-tet mesh built from it by one refinement
+    (new surface nodes onto the skull's inner surface)."""
     coarse = build_brain_mesh(synthetic_image, target_tets=4_000, brain_volume_ml=400.0)
     fine = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,
                             refinements=1)
+    return coarse, fine
+
+
+def test_refined_mesh_is_nested_in_the_netgen_mesh(coarse_and_refined) -> None:
+    """``refinements=1``: Netgen's mesh at a size of 1/8, refined: its nodes come first and
+    unchanged, eight times the tets, the new surface nodes on the skull's inner surface, the
+    tissue volumes those of the image as on a mesh built directly."""
+    coarse, fine = coarse_and_refined
     assert len(fine.tets) == 8 * len(coarse.tets)
     assert np.array_equal(fine.nodes_mm[: len(coarse.nodes_mm)], coarse.nodes_mm)
     assert fine.quality()["inverted_tets"] == 0
@@ -255,17 +263,15 @@ def test_refined_mesh_is_nested_in_the_netgen_mesh(synthetic_image) -> None:
                                                             rel=0.1)
 
 
-def test_flat_refinement_keeps_the_netgen_geometry(synthetic_image) -> None:
+def test_flat_refinement_keeps_the_netgen_geometry(synthetic_image, coarse_and_refined) -> None:
     """``refine_onto_envelope=False``: the new surface nodes stay at the midpoints of the
     coarse surface edges, so the refined mesh has exactly the coarse mesh's volume (the
     refinement onto the envelope adds the chords' gap, > 0.1 % here)."""
     from brainbulge.results.brain_metrics import brain_volume_ml
 
-    coarse = build_brain_mesh(synthetic_image, target_tets=4_000, brain_volume_ml=400.0)
+    coarse, moved = coarse_and_refined
     flat = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,
                             refinements=1, refine_onto_envelope=False)
-    moved = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,
-                             refinements=1)
     v_coarse = brain_volume_ml(coarse.nodes_mm, coarse.tets)
     assert brain_volume_ml(flat.nodes_mm, flat.tets) == pytest.approx(v_coarse, rel=1e-12)
     assert brain_volume_ml(moved.nodes_mm, moved.tets) > (1 + 1e-3) * v_coarse
