@@ -42,6 +42,18 @@ def box3d() -> ngs.Mesh:
     return unit_box_mesh(3)
 
 
+@pytest.fixture(scope="session")
+def quick_demo(tmp_path_factory):
+    """The main job, ``brainbulge demo --quick``, run once: (exit code, output folder).
+
+    Its ``brain/mesh/brain.npz`` is the ICBM152 template at 30k target tets, the default
+    brain the template tests check."""
+    from brainbulge.cli import main
+
+    out = tmp_path_factory.mktemp("quick-demo") / "demo"
+    return main(["demo", "--quick", "--out", str(out)]), out
+
+
 @pytest.fixture(scope="module")
 def swollen():
     """Form, Newton solver and the tangent/right-hand side of a Newton step at a swollen

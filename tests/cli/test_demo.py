@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import re
 
-from brainbulge.cli import main
 
-
-def test_demo_quick_report(tmp_path) -> None:
-    out = tmp_path / "demo"
-    assert main(["demo", "--quick", "--out", str(out)]) == 0
+def test_demo_quick_report(quick_demo) -> None:
+    rc, out = quick_demo
+    assert rc == 0
     report = (out / "report.md").read_text()
     images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
     assert len(images) >= 8

@@ -10,12 +10,12 @@ import time
 from pathlib import Path
 
 import pytest
-from distributed import LocalCluster
+from distributed import Client
 
 import _study_tasks as tasks
 import brainbulge
 from brainbulge.errors import InputError
-from brainbulge.studies.runner import run_study
+from brainbulge.studies.runner import local_cluster, run_study, shared_scheduler
 
 TASK = tasks.counting_task
 
@@ -179,11 +179,9 @@ def test_local_cluster_two_workers(tmp_path: Path, monkeypatch: pytest.MonkeyPat
 
     # Resume on an existing scheduler (address): everything finished is loaded, only the
     # failed scenario runs again (and fails again); the runner leaves that cluster running.
-    with LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
-    ) as cluster:
-        rows2 = run_study(scenarios, TASK, tmp_path, scheduler=cluster.scheduler_address)
-        assert len(cluster.scheduler_info["workers"]) == 1
+    with local_cluster(1) as address, Client(address) as client:
+        rows2 = run_study(scenarios, TASK, tmp_path, scheduler=address)
+        assert len(client.scheduler_info()["workers"]) == 1
     assert rows2 == rows
     assert [tasks.calls(tmp_path / s["name"]) for s in scenarios] == [1, 1, 2, 1, 1, 1]
 
@@ -201,3 +199,22 @@ def test_local_cluster_starts_the_costliest_first(tmp_path: Path,
     assert [r["name"] for r in rows] == [s["name"] for s in scenarios]  # the input order
     started = sorted(rows, key=lambda r: r["started"])
     assert [r["square"] for r in started] == [4, 16, 0, 9, 1]  # x = 2, 4, 0, 3, 1
+
+
+def test_studies_in_a_row_share_one_set_of_workers(tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """``shared_scheduler(None)`` starts one local cluster for several studies (the demo's
+    three); a given scheduler ("serial" here) is passed through unchanged."""
+    src = Path(brainbulge.__file__).resolve().parents[1]
+    paths = [str(Path(tasks.__file__).parent), str(src), os.environ.get("PYTHONPATH", "")]
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in paths if p))
+    with shared_scheduler(None, 2) as scheduler:
+        assert scheduler.startswith("tcp://")
+        first = run_study(_scenarios(4, sleep_s=0.2), TASK, tmp_path / "a", scheduler=scheduler,
+                          progress=False)
+        second = run_study(_scenarios(4, sleep_s=0.2), TASK, tmp_path / "b",
+                           scheduler=scheduler, progress=False)
+    pids = {r["pid"] for r in first}
+    assert len(pids) == 2 and {r["pid"] for r in second} == pids
+    with shared_scheduler("serial") as scheduler:
+        assert scheduler == "serial"

@@ -30,6 +30,7 @@ def add_parser(sub: Any) -> None:
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
     from brainbulge.results.report import write_demo_report
+    from brainbulge.studies.runner import shared_scheduler
     from brainbulge.studies.suites import demo_plan, demo_scenarios, run_named_study
 
     checks.scheduler(args.scheduler)
@@ -39,13 +40,13 @@ def run_command(args: argparse.Namespace) -> int:
     out = start_run(args, {"command": "demo", "quick": args.quick, **plan})
     parts = demo_scenarios(plan)
     headline, sweep, brain = parts["headline"], parts["sweep"], parts["brain"]
-    print(f"1/3 headline case, both contact conditions -> {out / 'headline'}")
-    ok1 = run_named_study("hemidisk-sector", headline, out / "headline", args.scheduler,
-                          args.workers)
-    print(f"2/3 sector sweep ({len(sweep)} runs) -> {out / 'sweep'}")
-    ok2 = run_named_study("hemidisk-sector", sweep, out / "sweep", args.scheduler, args.workers)
-    print(f"3/3 craniectomy on the ICBM152 brain ({len(brain)} runs) -> {out / 'brain'}")
-    ok3 = run_named_study("craniectomy", brain, out / "brain", args.scheduler, args.workers)
+    with shared_scheduler(args.scheduler, args.workers) as scheduler:  # one set of workers
+        print(f"1/3 headline case, both contact conditions -> {out / 'headline'}")
+        ok1 = run_named_study("hemidisk-sector", headline, out / "headline", scheduler)
+        print(f"2/3 sector sweep ({len(sweep)} runs) -> {out / 'sweep'}")
+        ok2 = run_named_study("hemidisk-sector", sweep, out / "sweep", scheduler)
+        print(f"3/3 craniectomy on the ICBM152 brain ({len(brain)} runs) -> {out / 'brain'}")
+        ok3 = run_named_study("craniectomy", brain, out / "brain", scheduler)
     report = write_demo_report(out, headline, sweep, brain)
     total = len(headline) + len(sweep) + len(brain)
     finish_run(out, f"{ok1 + ok2 + ok3} of {total} scenarios complete")

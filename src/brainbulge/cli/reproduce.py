@@ -7,7 +7,7 @@
    at the paper's resolution by default (the paper: 1,275,808 tets; here Netgen meshes at
    ``--tets / 8`` and the mesh is refined once, ~1.4M tets). The six scenarios share one
    mesh (``craniectomy/mesh/``) and, from 400k tets on, one coarse mesh for mesh sequencing
-   (``craniectomy/coarse-mesh/``, the unrefined Netgen mesh: each scenario ramps its load
+   (``craniectomy/coarse-mesh/``, a Netgen mesh of 100k tets: each scenario ramps its load
    there and finishes on the fine mesh), the compiled energy (cached on disk) and, per
    worker, the loaded meshes; they run one at a time (one worker: ~10 GB each at 1.4M tets)
    with the Krylov solver.
@@ -19,6 +19,7 @@ goes on from its last load step. ``--tets 30000`` (21k tets) gives the 3D part i
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +57,7 @@ def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from brainbulge.studies.runner import shared_scheduler
     from brainbulge.studies.suites import incomplete_text, run_named_study
 
     parts = plan(args)
@@ -65,16 +67,24 @@ def run_command(args: argparse.Namespace) -> int:
                     resume=resume)
     atomic_write_json(out / "study.json", {"study": "reproduce", "parts": list(parts)})
     names = {"sector": "hemidisk-sector", "disk": "hemidisk-disk"}
+    done: dict[str, int] = {}
+    step = iter(range(1, len(parts) + 1))
+    two_d = [p for p in parts if p in names]
+    with contextlib.ExitStack() as stack:
+        if two_d:  # one set of workers for the 2D parts
+            scheduler = stack.enter_context(shared_scheduler(args.scheduler, args.workers))
+        for part in two_d:
+            print(f"{next(step)}/{len(parts)} {part} ({len(parts[part])} runs) -> {out / part}")
+            done[part] = run_named_study(names[part], parts[part], out / part, scheduler)
+    if "craniectomy" in parts:
+        scenarios = parts["craniectomy"]
+        print(f"{next(step)}/{len(parts)} craniectomy ({len(scenarios)} runs) -> "
+              f"{out / 'craniectomy'}")
+        done["craniectomy"] = _run_brain_part(scenarios, out / "craniectomy", args)
     failed, texts = 0, []
-    for i, (part, scenarios) in enumerate(parts.items(), start=1):
-        print(f"{i}/{len(parts)} {part} ({len(scenarios)} runs) -> {out / part}")
-        if part == "craniectomy":
-            ok = _run_brain_part(scenarios, out / part, args)
-        else:
-            ok = run_named_study(names[part], scenarios, out / part, args.scheduler,
-                                      args.workers)
-        if ok < len(scenarios):
-            failed += len(scenarios) - ok
+    for part, scenarios in parts.items():
+        if done[part] < len(scenarios):
+            failed += len(scenarios) - done[part]
             texts.append(f"{part}: {incomplete_text(out / part, scenarios)}")
     if failed:
         raise StudyIncomplete(f"{failed} scenarios did not complete ({'; '.join(texts)})")

@@ -76,7 +76,8 @@ from brainbulge.studies.tasks import (
     to_json,
 )
 
-__all__ = ["SERIAL", "Task", "echo_task", "run_study", "validate_scenarios"]
+__all__ = ["SERIAL", "Task", "echo_task", "local_cluster", "run_study",
+           "shared_scheduler", "validate_scenarios"]
 
 logger = logging.getLogger(__name__)
 
@@ -378,6 +379,43 @@ def _finish(study: _Study, bar: Any, i: int, outcome: dict[str, Any]) -> None:
                 len(study.status) - study.status.count("pending"), len(study.status), n_failed)
 
 
+@contextlib.contextmanager
+def local_cluster(n_workers: int | None = None) -> Iterator[str]:
+    """A `distributed.LocalCluster` of ``n_workers`` (default 2) single-threaded worker
+    processes with :data:`WORKER_ENV`, closed on exit; yields its scheduler address.
+
+    `run_study` starts one per study when ``scheduler`` is None; a command that runs several
+    studies in a row passes this address to each of them instead, so that the workers start
+    (and import brainbulge and NGSolve) once. Its HTTP server takes a free port, so a second
+    cluster on the machine does not clash with the first."""
+    import importlib.util
+
+    from distributed import LocalCluster
+
+    if n_workers is not None and n_workers < 1:
+        raise InputError(f"n_workers must be at least 1, not {n_workers}")
+    with _worker_environ(WORKER_ENV):
+        cluster = LocalCluster(n_workers=n_workers or 2, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", env=dict(WORKER_ENV))
+    with cluster:
+        if importlib.util.find_spec("bokeh"):
+            logger.info("Dask dashboard: %s", cluster.dashboard_link)
+        yield cluster.scheduler_address
+
+
+@contextlib.contextmanager
+def shared_scheduler(scheduler: str | None, n_workers: int | None = None
+                     ) -> Iterator[str | None]:
+    """``scheduler`` for several studies in a row: a :func:`local_cluster` of ``n_workers``
+    started once when it is None, otherwise ``scheduler`` itself (``"serial"`` or an
+    address)."""
+    if scheduler is not None:
+        yield scheduler
+        return
+    with local_cluster(n_workers) as address:
+        yield address
+
+
 def _run_distributed(
     study: _Study,
     bar: Any,
@@ -388,27 +426,12 @@ def _run_distributed(
     n_workers: int | None,
 ) -> None:
     """Submit the pending scenarios to a Dask cluster and record them as they finish."""
-    import importlib.util
-
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
 
     with contextlib.ExitStack() as stack:
         if scheduler is None:
-            workers = min(n_workers or 2, len(pending))
-            dashboard = ":0" if importlib.util.find_spec("bokeh") else None
-            with _worker_environ(WORKER_ENV):
-                cluster = stack.enter_context(
-                    LocalCluster(
-                        n_workers=workers,
-                        threads_per_worker=1,
-                        processes=True,
-                        dashboard_address=dashboard,
-                        env=dict(WORKER_ENV),
-                    )
-                )
-            client = stack.enter_context(Client(cluster, set_as_default=False))
-            if dashboard:
-                logger.info("Dask dashboard: %s", client.dashboard_link)
+            address = stack.enter_context(local_cluster(min(n_workers or 2, len(pending))))
+            client = stack.enter_context(Client(address, set_as_default=False))
         else:
             try:
                 client = stack.enter_context(

@@ -26,7 +26,7 @@ PAPER_BRAIN_VOLUME_ML = 1108.0
 
 
 def run_named_study(name: str, scenarios: list[dict], out: Path, scheduler: str | None,
-                    workers: int | None) -> int:
+                    workers: int | None = None) -> int:
     """Run the scenarios of study ``name``, then write ``table.csv``, the figures and (sector
     and craniectomy studies) ``report.md``; return how many completed."""
     if name == "craniectomy":

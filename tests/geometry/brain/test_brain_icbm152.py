@@ -1,16 +1,18 @@
-"""The default brain: the ICBM152 template meshed at a coarse size (~40 s)."""
+"""The default brain: the ICBM152 template meshed at a coarse size (30k target tets), as
+the quick demo builds and saves it (its ``brain/mesh/brain.npz``, read back here)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from brainbulge.geometry.brain import TISSUES, build_brain_mesh, to_ngsolve
+from brainbulge.geometry.brain import TISSUES, build_brain_mesh, load_brain_mesh, to_ngsolve
 
 
 @pytest.fixture(scope="module")
-def icbm_mesh():
-    return build_brain_mesh(target_tets=30_000)
+def icbm_mesh(quick_demo):
+    _, out = quick_demo
+    return load_brain_mesh(out / "brain" / "mesh" / "brain.npz")
 
 
 def test_region_volumes_match_voxels(icbm_mesh) -> None:
