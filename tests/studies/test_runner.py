@@ -15,7 +15,12 @@ from distributed import Client
 import _study_tasks as tasks
 import brainbulge
 from brainbulge.errors import InputError
-from brainbulge.studies.runner import local_cluster, run_study, shared_scheduler
+from brainbulge.studies.runner import (
+    local_cluster,
+    run_study,
+    shared_scheduler,
+    worker_env,
+)
 
 TASK = tasks.counting_task
 
@@ -173,7 +178,9 @@ def test_local_cluster_two_workers(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert [r["square"] for r in done] == [0, 1, 9, 16, 25]
     pids = {r["pid"] for r in done}
     assert os.getpid() not in pids and len(pids) == 2  # two worker processes shared the work
-    assert all(r["threads"] == {"OMP_NUM_THREADS": "1", "NGS_NUM_THREADS": "1"} for r in done)
+    threads = worker_env(2)["OMP_NUM_THREADS"]  # cores // 2: 1 on 2 cores
+    assert all(r["threads"] == {"OMP_NUM_THREADS": threads, "NGS_NUM_THREADS": threads}
+               for r in done)
     assert os.environ["OMP_NUM_THREADS"] == "4"  # parent environment restored
     assert elapsed < 30
 
@@ -218,3 +225,13 @@ def test_studies_in_a_row_share_one_set_of_workers(tmp_path: Path,
     assert len(pids) == 2 and {r["pid"] for r in second} == pids
     with shared_scheduler("serial") as scheduler:
         assert scheduler == "serial"
+
+
+def test_workers_share_the_cores() -> None:
+    """cores // workers threads each, at least one, in every thread-count variable."""
+    assert set(worker_env(2, cores=2).values()) == {"1"}
+    assert set(worker_env(1, cores=2).values()) == {"2"}
+    assert set(worker_env(3, cores=8).values()) == {"2"}
+    assert set(worker_env(4, cores=2).values()) == {"1"}
+    assert set(worker_env(1, cores=2)) >= {"OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                                           "NGS_NUM_THREADS", "NUMBA_NUM_THREADS"}

@@ -20,11 +20,12 @@ folder ``out_dir/<name>/``, and records the outcome there:
 
 Where the scenarios run (``scheduler``):
 
-* ``None`` (default): a `distributed.LocalCluster` of ``n_workers`` (default 2) single-threaded
-  worker *processes*, with ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``
-  and ``NGS_NUM_THREADS`` set to 1 so that the workers do not oversubscribe the cores; closed
-  at the end. Worker processes are *spawned*: a script calling `run_study` must guard its
-  top level with ``if __name__ == "__main__":``.
+* ``None`` (default): a `distributed.LocalCluster` of ``n_workers`` (default 2) worker
+  *processes*, each running one scenario at a time with ``OMP_NUM_THREADS``,
+  ``MKL_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``, ``NGS_NUM_THREADS`` and ``NUMBA_NUM_THREADS``
+  set to cores / ``n_workers`` (at least 1), so that the workers neither oversubscribe the
+  cores nor leave them idle; closed at the end. Worker processes are *spawned*: a script
+  calling `run_study` must guard its top level with ``if __name__ == "__main__":``.
 * ``"serial"``: one after the other in this process: no pickling, breakpoints and profilers work;
   for debugging and fast tests.
 * an address such as ``"tcp://10.0.0.5:8786"``: an existing scheduler (e.g. a ``dask-jobqueue``
@@ -92,16 +93,23 @@ RESERVED_NAMES = frozenset(
     {"study.json", "run.json", "run.toml", "status.json", "summary.json", "error.json"}
 )
 
-#: Environment of worker processes: one BLAS/OpenMP/MKL (pypardiso), NGSolve
-#: ``TaskManager`` and Numba (closed-form tangent) thread each, so ``n_workers`` processes
-#: use ``n_workers`` cores.
-WORKER_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "NGS_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
-}
+#: The thread-count variables of a worker process: BLAS/OpenMP/MKL (pypardiso), NGSolve's
+#: ``TaskManager`` and Numba (closed-form tangent).
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                    "NGS_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def worker_env(n_workers: int, cores: int | None = None) -> dict[str, str]:
+    """The thread counts of ``n_workers`` worker processes sharing ``cores`` cores (default:
+    those this process may use): ``cores // n_workers`` threads each, at least one, so that
+    the workers neither oversubscribe the cores nor leave them idle (one worker of a
+    paper-sized 3D scenario uses every core)."""
+    if cores is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
+    threads = str(max(1, cores // max(1, n_workers)))
+    return dict.fromkeys(THREAD_VARIABLES, threads)
+
 
 CONNECT_TIMEOUT = "10s"  #: how long to try to reach an existing Dask scheduler
 
@@ -381,8 +389,9 @@ def _finish(study: _Study, bar: Any, i: int, outcome: dict[str, Any]) -> None:
 
 @contextlib.contextmanager
 def local_cluster(n_workers: int | None = None) -> Iterator[str]:
-    """A `distributed.LocalCluster` of ``n_workers`` (default 2) single-threaded worker
-    processes with :data:`WORKER_ENV`, closed on exit; yields its scheduler address.
+    """A `distributed.LocalCluster` of ``n_workers`` (default 2) worker processes, one
+    scenario at a time each, with the thread counts of :func:`worker_env`; closed on exit;
+    yields its scheduler address.
 
     `run_study` starts one per study when ``scheduler`` is None; a command that runs several
     studies in a row passes this address to each of them instead, so that the workers start
@@ -394,9 +403,11 @@ def local_cluster(n_workers: int | None = None) -> Iterator[str]:
 
     if n_workers is not None and n_workers < 1:
         raise InputError(f"n_workers must be at least 1, not {n_workers}")
-    with _worker_environ(WORKER_ENV):
-        cluster = LocalCluster(n_workers=n_workers or 2, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", env=dict(WORKER_ENV))
+    n_workers = n_workers or 2
+    env = worker_env(n_workers)
+    with _worker_environ(env):
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", env=env)
     with cluster:
         if importlib.util.find_spec("bokeh"):
             logger.info("Dask dashboard: %s", cluster.dashboard_link)
