@@ -183,7 +183,8 @@ def plot_sections(
 
     fig, axes = plt.subplots(len(names), len(planes), figsize=(4.4 * len(planes),
                                                                3.6 * len(names)),
-                             squeeze=False, layout="constrained")
+                             squeeze=False)
+    fig.subplots_adjust(left=0.09, right=0.97, bottom=0.04, top=0.93, wspace=0.25, hspace=0.28)
     for row, name in enumerate(names):
         field_key = _field_key(name)
         vals = [sec.values[:, 3 + row] for sec in sections.values() if len(sec.triangles)]
