@@ -42,3 +42,11 @@ def calls(scenario_dir: Path) -> int:
     """How many times ``counting_task`` ran in ``scenario_dir``."""
     path = Path(scenario_dir) / "calls.txt"
     return len(path.read_text().splitlines()) if path.exists() else 0
+
+
+def logging_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
+    """Logs one INFO line on the package's logger, as a solver's load steps do."""
+    import logging
+
+    logging.getLogger("brainbulge").info("load 0.5000: 3 Newton iterations (%s)", scenario["name"])
+    return {"logged": True}

@@ -235,3 +235,18 @@ def test_workers_share_the_cores() -> None:
     assert set(worker_env(4, cores=2).values()) == {"1"}
     assert set(worker_env(1, cores=2)) >= {"OMP_NUM_THREADS", "MKL_NUM_THREADS",
                                            "NGS_NUM_THREADS", "NUMBA_NUM_THREADS"}
+
+
+def test_a_worker_logs_each_scenario_into_its_folder(tmp_path: Path) -> None:
+    """On a worker the package's INFO lines of a scenario go to its ``brainbulge.log`` as it
+    runs; the logger is left as it was."""
+    import logging
+
+    from brainbulge.studies.tasks import execute_on_worker
+
+    log = logging.getLogger("brainbulge")
+    handlers, level = list(log.handlers), log.level
+    out = execute_on_worker(tasks.logging_task, {"name": "s00"}, str(tmp_path))
+    assert out["ok"]
+    assert "load 0.5000: 3 Newton iterations (s00)" in (tmp_path / "brainbulge.log").read_text()
+    assert log.handlers == handlers and log.level == level

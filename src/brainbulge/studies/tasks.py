@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import logging
 import traceback
 from collections.abc import Callable, Mapping
 from pathlib import Path, PurePath
@@ -85,10 +86,30 @@ def execute(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[str
         return {"ok": False, "error": one_line(exc), "traceback": traceback.format_exc()}
 
 
+#: each scenario's own log on a cluster (INFO and above), next to its results
+SCENARIO_LOG = "brainbulge.log"
+
+
 def execute_on_worker(task: Task, scenario: dict[str, Any], scenario_dir: str) -> dict[str, Any]:
     """`execute` in a worker process, after the process-wide tuning of a run
-    (:func:`brainbulge.runtime.configure`: the heap is per process)."""
+    (:func:`brainbulge.runtime.configure`: the heap is per process), logging the scenario's
+    progress (load steps, Newton, warnings) to ``scenario_dir/brainbulge.log`` as it runs."""
     from brainbulge.runtime import configure
 
     configure()
-    return execute(task, scenario, scenario_dir)
+    log = logging.getLogger("brainbulge")
+    level = log.level
+    try:
+        handler = logging.FileHandler(Path(scenario_dir) / SCENARIO_LOG)
+    except OSError:  # no log file is no reason to lose the scenario
+        return execute(task, scenario, scenario_dir)
+    handler.setLevel(logging.INFO)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO if level in (logging.NOTSET, 0) else min(level, logging.INFO))
+    try:
+        return execute(task, scenario, scenario_dir)
+    finally:
+        log.removeHandler(handler)
+        handler.close()
+        log.setLevel(level)
