@@ -31,7 +31,12 @@ def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
     from brainbulge.results.report import write_demo_report
     from brainbulge.studies.runner import shared_scheduler
-    from brainbulge.studies.suites import demo_plan, demo_scenarios, run_named_study
+    from brainbulge.studies.suites import (
+        brain_meshes_meanwhile,
+        demo_plan,
+        demo_scenarios,
+        run_named_study,
+    )
 
     checks.scheduler(args.scheduler)
     if args.workers is not None and not 1 <= args.workers <= 256:
@@ -41,10 +46,11 @@ def run_command(args: argparse.Namespace) -> int:
     parts = demo_scenarios(plan)
     headline, sweep, brain = parts["headline"], parts["sweep"], parts["brain"]
     with shared_scheduler(args.scheduler, args.workers) as scheduler:  # one set of workers
-        print(f"1/3 headline case, both contact conditions -> {out / 'headline'}")
-        ok1 = run_named_study("hemidisk-sector", headline, out / "headline", scheduler)
-        print(f"2/3 sector sweep ({len(sweep)} runs) -> {out / 'sweep'}")
-        ok2 = run_named_study("hemidisk-sector", sweep, out / "sweep", scheduler)
+        with brain_meshes_meanwhile(scheduler, out / "brain", brain):
+            print(f"1/3 headline case, both contact conditions -> {out / 'headline'}")
+            ok1 = run_named_study("hemidisk-sector", headline, out / "headline", scheduler)
+            print(f"2/3 sector sweep ({len(sweep)} runs) -> {out / 'sweep'}")
+            ok2 = run_named_study("hemidisk-sector", sweep, out / "sweep", scheduler)
         print(f"3/3 craniectomy on the ICBM152 brain ({len(brain)} runs) -> {out / 'brain'}")
         ok3 = run_named_study("craniectomy", brain, out / "brain", scheduler)
     report = write_demo_report(out, headline, sweep, brain)

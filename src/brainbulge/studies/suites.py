@@ -6,11 +6,15 @@
   resolution);
 - :func:`run_named_study`: run a study's scenarios on the runner, then write its table,
   figures and report; :func:`incomplete_text` says what became of those that did not
-  complete.
+  complete; :func:`brain_meshes_meanwhile` builds a 3D study's meshes on a worker while other
+  studies run.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +51,36 @@ def run_named_study(name: str, scenarios: list[dict], out: Path, scheduler: str 
     else:
         hd.disk_figures(out, scenarios, rows)
     return sum(1 for r in rows if r.get("complete"))
+
+
+@contextlib.contextmanager
+def brain_meshes_meanwhile(scheduler: str | None, out: Path, scenarios: list[dict]
+                           ) -> Iterator[None]:
+    """Build the shared meshes of the 3D study ``scenarios`` in ``out`` (as
+    :func:`~brainbulge.studies.craniectomy.attach_study_meshes` does) as one task on the Dask
+    cluster at ``scheduler`` while the block runs other studies there; wait for it at the end.
+
+    Netgen meshes on one core while the workers would otherwise wait for the 2D studies to
+    finish; the 3D study then finds its meshes built (the quick demo 68 -> 55 s on 2 cores).
+    Nothing happens without a cluster (``"serial"``); a failure is left for the 3D study to
+    meet again and report, in this process."""
+    if scheduler is None or scheduler == "serial":
+        yield
+        return
+    from distributed import Client
+
+    from brainbulge.studies.craniectomy import attach_study_meshes
+
+    with Client(scheduler, set_as_default=False) as client:
+        future = client.submit(attach_study_meshes, out, scenarios, pure=False, priority=1)
+        try:
+            yield
+        finally:
+            try:
+                future.result()
+            except Exception as exc:  # noqa: BLE001 - the 3D study builds the mesh again
+                logging.getLogger(__name__).debug("meshing on a worker failed: %s", exc)
+            future.release()
 
 
 def incomplete_text(out: Path, scenarios: list[dict]) -> str:
