@@ -58,7 +58,11 @@ def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
 
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.studies.runner import shared_scheduler
-    from brainbulge.studies.suites import incomplete_text, run_named_study
+    from brainbulge.studies.suites import (
+        brain_meshes_meanwhile,
+        incomplete_text,
+        run_named_study,
+    )
 
     parts = plan(args)
     out_path = Path(args.out)
@@ -71,8 +75,11 @@ def run_command(args: argparse.Namespace) -> int:
     step = iter(range(1, len(parts) + 1))
     two_d = [p for p in parts if p in names]
     with contextlib.ExitStack() as stack:
-        if two_d:  # one set of workers for the 2D parts
+        if two_d:  # one set of workers for the 2D parts, the 3D meshes built meanwhile
             scheduler = stack.enter_context(shared_scheduler(args.scheduler, args.workers))
+            if "craniectomy" in parts:
+                stack.enter_context(brain_meshes_meanwhile(scheduler, out / "craniectomy",
+                                                           parts["craniectomy"]))
         for part in two_d:
             print(f"{next(step)}/{len(parts)} {part} ({len(parts[part])} runs) -> {out / part}")
             done[part] = run_named_study(names[part], parts[part], out / part, scheduler)
