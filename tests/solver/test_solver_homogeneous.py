@@ -277,3 +277,22 @@ def test_an_attempt_that_stagnates_stops_early(monkeypatch) -> None:
     assert not ok4 and not ok0
     assert its4 == 4 and its0 > 8
     assert norm0 < norm4  # the short steps did lower the residual, a little
+
+
+def test_a_slow_newton_solve_logs_its_iterations(box2d, monkeypatch, caplog) -> None:
+    """Past ``SLOW_NEWTON_S`` of a Newton solve every iteration is logged at INFO (a long
+    fine-mesh solve shows progress); before that at DEBUG only."""
+    import logging
+
+    import brainbulge.solver.newton as newton
+
+    problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.2}, clamped_components=SYMMETRY)
+    with caplog.at_level(logging.INFO, logger="brainbulge"):
+        solve(problem, element="mini")
+    assert not [r for r in caplog.records if "newton 0:" in r.getMessage()]
+    monkeypatch.setattr(newton, "SLOW_NEWTON_S", -1.0)
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="brainbulge"):
+        solve(problem, element="mini")
+    lines = [r for r in caplog.records if "newton" in r.getMessage() and "|R|" in r.getMessage()]
+    assert lines and all(r.levelno == logging.INFO for r in lines)

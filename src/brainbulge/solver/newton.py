@@ -17,6 +17,7 @@ The load ramp around it (predictor, cut-back, restart) is :mod:`brainbulge.solve
 from __future__ import annotations
 
 import logging
+import time
 from contextlib import nullcontext
 
 import ngsolve as ngs
@@ -39,6 +40,9 @@ log = logging.getLogger("brainbulge")
 #: than 5 % (where the load path folds, the 2D alpha 80 / beta 30 runs spent all 20
 #: iterations on 0.1-0.4 % steps, attempt after attempt)
 STAGNATION = 4
+#: a Newton solve running longer than this [s] logs each iteration at INFO (else DEBUG), so
+#: that a long fine-mesh solve shows its progress in the log
+SLOW_NEWTON_S = 30.0
 
 
 class NewtonSolver(MixedEquations):
@@ -124,9 +128,12 @@ class NewtonSolver(MixedEquations):
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
         short_steps, norm_before_short = 0, norm  # the run of short line-search steps
+        started = time.perf_counter()
         for it in range(self.opt.max_iterations + 1):
             self.history[-1].append(norm)
-            log.debug("    newton %d: |R| = %.3e", it, norm)
+            elapsed = time.perf_counter() - started
+            log.log(logging.INFO if elapsed > SLOW_NEWTON_S else logging.DEBUG,
+                    "    newton %d: |R| = %.3e (%.0f s)", it, norm, elapsed)
             if norm <= self.tolerance:
                 return True, it, norm
             if not np.isfinite(norm) or it == self.opt.max_iterations:
