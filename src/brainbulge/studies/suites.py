@@ -61,7 +61,8 @@ def brain_meshes_meanwhile(scheduler: str | None, out: Path, scenarios: list[dic
     cluster at ``scheduler`` while the block runs other studies there; wait for it at the end.
 
     Netgen meshes on one core while the workers would otherwise wait for the 2D studies to
-    finish; the 3D study then finds its meshes built (the quick demo 68 -> 55 s on 2 cores).
+    finish; the 3D study then finds its meshes built (the quick demo's ~20 s of Netgen
+    overlap its 2D studies).
     Nothing happens without a cluster (``"serial"``); a failure is left for the 3D study to
     meet again and report, in this process."""
     if scheduler is None or scheduler == "serial":
