@@ -250,3 +250,30 @@ def test_a_worker_logs_each_scenario_into_its_folder(tmp_path: Path) -> None:
     assert out["ok"]
     assert "load 0.5000: 3 Newton iterations (s00)" in (tmp_path / "brainbulge.log").read_text()
     assert log.handlers == handlers and log.level == level
+
+
+def test_a_3d_study_s_mesh_is_built_on_a_worker_meanwhile(tmp_path: Path,
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """``brain_meshes_meanwhile`` builds the study's shared mesh on the cluster while the
+    block runs (here: nothing in this process meshes) and the 3D study then reuses it."""
+    from brainbulge.studies.craniectomy import attach_study_meshes, craniectomy_scenarios
+    from brainbulge.studies.suites import brain_meshes_meanwhile
+    from toy_brain import toy_labels
+
+    src = Path(brainbulge.__file__).resolve().parents[1]
+    paths = [str(Path(tasks.__file__).parent), str(src), os.environ.get("PYTHONPATH", "")]
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in paths if p))
+    labels = toy_labels(tmp_path / "seg.nii.gz")
+    scenarios = craniectomy_scenarios(labels=str(labels), label_map="synthseg", tets=1000)
+    out = tmp_path / "brain"
+    with shared_scheduler(None, 1) as scheduler, brain_meshes_meanwhile(scheduler, out,
+                                                                       scenarios):
+        pass
+    mesh = out / "mesh" / "brain.npz"
+    assert mesh.is_file()
+    built = mesh.stat().st_mtime_ns
+    attached = attach_study_meshes(out, scenarios)  # found, not built again
+    assert attached[0]["mesh"] == str(mesh) and mesh.stat().st_mtime_ns == built
+    with brain_meshes_meanwhile("serial", tmp_path / "none", scenarios):
+        pass
+    assert not (tmp_path / "none").exists()
