@@ -2,10 +2,11 @@
 
 The state ``x = (u, p)`` on the free DOFs, with the contact pressures ``lambda``, solves
 ``R(x) = 0``: the stationarity of MODEL.md section 2's Lagrangian (NGSolve's ``Variation``,
-or the closed-form MINI tangent of :mod:`brainbulge.solver.fast.mini_tangent`) plus the contact
-forces ``-B^T lambda`` and the complementarity of the active set
-(:mod:`brainbulge.solver.contact`). MINI's bubbles are condensed statically: the direction
-is solved on the vertex DOFs and extended into the bubbles.
+or the closed forms of :mod:`brainbulge.solver.fast.mini_tangent` and, in 2D with the
+residual too, :mod:`brainbulge.solver.fast.mini_plane`) plus the contact forces
+``-B^T lambda`` and the complementarity of the active set (:mod:`brainbulge.solver.contact`).
+MINI's bubbles are condensed statically: the direction is solved on the vertex DOFs and
+extended into the bubbles.
 """
 
 from __future__ import annotations
@@ -34,14 +35,16 @@ class MixedEquations:
     def __init__(self, form: MixedForm, linear_solver: str = "pardiso") -> None:
         self.form = form
         self.linear: LinearSolver = make_linear_solver(linear_solver, form)
-        self.closed = None  # the closed-form tangent, where it applies
-        if form.element == "mini" and form.dim == 3:
+        self.closed = None  # the closed-form tangent (and 2D residual), where it applies
+        if form.element == "mini":
             # (Numba, ~0.5 s: imported only where it may apply)
-            from brainbulge.solver.fast import mini_tangent
+            from brainbulge.solver.fast import mini_plane, mini_tangent
 
-            if mini_tangent.applies(form):
+            kind = mini_tangent if form.dim == 3 else mini_plane
+            if kind.applies(form):
                 try:
-                    self.closed = mini_tangent.MiniTangent(form)
+                    self.closed = (mini_tangent.MiniTangent(form) if form.dim == 3
+                                   else mini_plane.PlaneMiniTangent(form))
                 except ValueError as exc:  # a numbering or element it does not know
                     log.warning("closed-form tangent not used (%s); NGSolve's instead", exc)
         fes = form.fes
@@ -96,8 +99,11 @@ class MixedEquations:
         """``R(x)`` (full DOF numbering) with the contact forces ``-B^T lambda`` at the
         current multipliers; also their complementarity residuals for :meth:`scaled_norm`."""
         t0 = time.perf_counter()
-        with ngs.TaskManager():
-            self.form.a.Apply(x, self.res)
+        if self.closed is not None and self.closed.has_residual:
+            self.res.FV().NumPy()[:] = self.closed.residual(x.FV().NumPy())
+        else:
+            with ngs.TaskManager():
+                self.form.a.Apply(x, self.res)
         R = self.res.FV().NumPy()
         self.contact.add_forces(x.FV().NumPy(), R)
         self.t_assembly += time.perf_counter() - t0

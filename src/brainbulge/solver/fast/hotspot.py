@@ -20,8 +20,9 @@ After an accepted Newton step, with ``r_v`` the scaled residual of the DOFs at v
 - local problem: ``R_i(x_P, x_rest) = 0`` for the displacement and pressure DOFs of ``P``
   and the bubbles of the elements around ``P`` (their equations involve those elements
   only), solved by Newton with a backtracking line search, element matrices from NGSolve's
-  integrators (``CalcLinearizedElementMatrix`` / ``ApplyElementMatrix``), the sparse local
-  tangent factorised by SuperLU.
+  integrators (``CalcLinearizedElementMatrix`` / ``ApplyElementMatrix``; in 2D from the
+  closed form of :mod:`brainbulge.solver.fast.mini_plane`), the sparse local tangent
+  factorised by SuperLU.
 
 The result is kept only when the global residual norm falls and no contact point of the
 patch has come to press on the skull; else the state is restored. Written by hand: no
@@ -249,6 +250,12 @@ class LocalProblem:
         pos = {int(d): i for i, d in enumerate(self.dofs)}
         self.items = [(fe, tr, dofs, bfis, np.array([pos.get(int(d), -1) for d in dofs]))
                       for fe, tr, dofs, bfis in self.items]
+        closed = solver.closed
+        # the 2D closed form's element systems, all elements at once (else NGSolve's, one by one)
+        self.closed = closed if closed is not None and closed.has_residual else None
+        if self.closed is not None:
+            self.elements = np.asarray(elements, dtype=np.int64)
+            self.loc = np.array([item[4] for item in self.items])
         u = fes.Range(0)
         is_u = (self.dofs >= u.start) & (self.dofs < u.stop)
         self.scale = np.where(is_u, 1 / solver.force_scale, 1 / solver.volume)
@@ -281,7 +288,16 @@ class LocalProblem:
         n = len(self.dofs)
         R = np.zeros(n + self.n_lam)
         rows, cols, vals = [], [], []
-        for fe, tr, dofs, bfis, loc in self.items:
+        if self.closed is not None:
+            r_e, K_e = self.closed.element_systems(self.elements, X, tangent)
+            on = self.loc >= 0
+            np.add.at(R, self.loc[on], r_e[on])
+            if tangent:
+                pair = on[:, :, None] & on[:, None, :]
+                rows.append(np.broadcast_to(self.loc[:, :, None], K_e.shape)[pair])
+                cols.append(np.broadcast_to(self.loc[:, None, :], K_e.shape)[pair])
+                vals.append(K_e[pair])
+        for fe, tr, dofs, bfis, loc in self.items if self.closed is None else ():
             xe = ngs.Vector(X[dofs])
             on = loc >= 0
             li = loc[on]

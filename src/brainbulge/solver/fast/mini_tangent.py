@@ -64,9 +64,10 @@ QUAD_POINTS = np.array([[_A, _B, _B, _B], [_B, _A, _B, _B], [_B, _B, _A, _B], [_
 
 
 @numba.njit(cache=True, inline="always")
-def hessian(F, p, c1, c2, A, H):  # noqa: ANN001, ANN202 - Numba kernel
+def hessian(F, p, c1, c2, A, H, n=3):  # noqa: ANN001, ANN202 - Numba kernel
     """``A = d2W/dF2`` as a 9x9 matrix (row ``3 i + j``, column ``3 k + l``) and
-    ``H = cof F = dJ/dF`` for one integration point (the closed form of the module)."""
+    ``H = cof F = dJ/dF`` for one integration point (the closed form of the module); with
+    ``n = 2`` only the entries with ``i, j, k, l < 2`` (plane strain)."""
     H[0, 0] = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
     H[0, 1] = F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2]
     H[0, 2] = F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]
@@ -105,10 +106,10 @@ def hessian(F, p, c1, c2, A, H):  # noqa: ANN001, ANN202 - Numba kernel
     s_kron = 2.0 * psi1 + 2.0 * psi2 * I1
     s_HH = psiJJ + psiJ / J
     s_sw = psiJ / J
-    for i in range(3):
-        for j in range(3):
-            for k in range(3):
-                for m in range(3):  # m is the l of the docstring
+    for i in range(n):
+        for j in range(n):
+            for k in range(n):
+                for m in range(n):  # m is the l of the docstring
                     e = (4.0 * psi2 * F[i, j] * F[k, m] + s_HH * H[i, j] * H[k, m]
                          + 2.0 * psi1J * (F[i, j] * H[k, m] + H[i, j] * F[k, m])
                          + psi2J * (dI2[i, j] * H[k, m] + H[i, j] * dI2[k, m])
@@ -302,6 +303,9 @@ class MiniTangent:
     ``form.a.harmonic_extension_trans``, ``harmonic_extension`` and ``inner_solve``
     for that tangent.
     """
+
+    #: whether :meth:`residual` exists (3D: the residual is NGSolve's, compiled)
+    has_residual = False
 
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         t0 = time.perf_counter()

@@ -1,0 +1,370 @@
+"""The plane-strain MINI residual and condensed tangent of a Mooney-Rivlin solid (2D).
+
+The 2D counterpart of :mod:`brainbulge.solver.fast.mini_tangent`: the same energy and its
+closed-form derivatives, evaluated at the plane-strain deformation gradient
+``F = [[F_2D, 0], [0, 1]]`` (so ``J = det F_2D`` and the in-plane block of ``cof F`` is
+``cof F_2D``)::
+
+    W(F, p) = c1/2 (J^(-2/3) I1 - 3) + c2/2 (J^(-4/3) I2 - 3) + p (J - Js(t))
+    P = dW/dF = 2 psi1 F + psi2 dI2 + psiJ H,          dI2 = 2 (I1 F - F C),  H = cof F
+
+    R_(ai) = sum_q w_q  P_ij dN_a/dX_j,          R_c = sum_q w_q (J - Js(t)) lambda_c
+    K_(ai)(bk) = sum_q w_q  dN_a/dX_j  A_ijkl  dN_b/dX_l,
+    K_(ai)c = sum_q w_q  H_ij dN_a/dX_j  lambda_c
+
+with ``A = d2W/dF2`` of :func:`~brainbulge.solver.fast.mini_tangent.hessian` (indices
+``i, j, k, l`` in the plane), ``N_a`` the three hats ``lambda_a`` and the bubble
+``B = c_B lambda_0 lambda_1 lambda_2``, the bubble condensed statically as in 3D. The
+hemidisk's boundary triangles are curved (quadratic geometry): the physical gradients
+``dN/dX = J_e^-T dN/dxi`` and the weights ``w_q |det J_e|`` come from NGSolve's element
+maps at NGSolve's own integration rule (order 5, 12 points: the rule its ``Variation`` uses
+here, energies equal to 1e-15), computed once per mesh.
+
+Written by hand for speed: NGSolve's automatic differentiation took 0.17 s per tangent and
+0.07 s per residual on the 11k-DOF headline mesh, the largest part of a 2D solve (line
+searches evaluate many residuals); these loops take milliseconds.
+"""
+
+from __future__ import annotations
+
+import re
+
+import ngsolve as ngs
+import numba
+import numpy as np
+import scipy.sparse as sp
+
+from brainbulge.geometry.ngsolve_arrays import element_vertices
+from brainbulge.materials.mooney_rivlin import MooneyRivlin
+from brainbulge.solver.fast.mini_tangent import MiniTangent, _pattern
+
+#: order of NGSolve's integration rule for the 2D MINI energy (vertex P1 + cubic bubble)
+QUAD_ORDER = 5
+#: the kernels' local DOF (6 vertex displacements ``2 a + i``, 3 pressures, 2 bubble
+#: components) of each of NGSolve's element DOFs (x: 3 vertices and the bubble, y, pressures)
+NGSOLVE_ORDER = np.array([0, 2, 4, 9, 1, 3, 5, 10, 6, 7, 8])
+#: gradients of the reference hats ``lambda_0 = xi, lambda_1 = eta, lambda_2 = 1 - xi - eta``
+_REF_GRAD = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
+
+
+@numba.njit(cache=True, inline="always")
+def plane_strain(F, p, c1, c2, P, H, A, C, b, dI2, tangent):  # noqa: ANN001, ANN202 - kernel
+    """``P = dW/dF``, ``H = cof F`` and, if ``tangent``, ``A = d2W/dF2`` (row ``2 i + j``,
+    column ``2 k + l``) of the in-plane ``F`` (2x2, ``F_33 = 1``); returns ``J``. The
+    formulas of :func:`~brainbulge.solver.fast.mini_tangent.hessian` with every index in
+    the plane (``I1 = tr C + 1``, ``I2 = (I1^2 - |C|^2 - 1) / 2``); ``C``, ``b``, ``dI2``
+    are work arrays (no allocation per integration point)."""
+    H[0, 0] = F[1, 1]
+    H[0, 1] = -F[1, 0]
+    H[1, 0] = -F[0, 1]
+    H[1, 1] = F[0, 0]
+    J = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+    for i in range(2):
+        for j in range(2):
+            C[i, j] = F[0, i] * F[0, j] + F[1, i] * F[1, j]
+            b[i, j] = F[i, 0] * F[j, 0] + F[i, 1] * F[j, 1]
+    I1 = C[0, 0] + C[1, 1] + 1.0
+    I2 = 0.5 * (I1 * I1 - (C[0, 0] ** 2 + C[0, 1] ** 2 + C[1, 0] ** 2 + C[1, 1] ** 2 + 1.0))
+    a = J ** (-2.0 / 3.0)  # NaN for J <= 0, as NGSolve's
+    psi1 = 0.5 * c1 * a
+    psi2 = 0.5 * c2 * a * a
+    psiJ = -c1 / 3.0 * a / J * I1 - 2.0 * c2 / 3.0 * a * a / J * I2 + p
+    for i in range(2):
+        for j in range(2):
+            dI2[i, j] = 2.0 * (I1 * F[i, j] - (F[i, 0] * C[0, j] + F[i, 1] * C[1, j]))
+            P[i, j] = 2.0 * psi1 * F[i, j] + psi2 * dI2[i, j] + psiJ * H[i, j]
+    if tangent:
+        psi1J = -c1 / 3.0 * a / J
+        psi2J = -2.0 * c2 / 3.0 * a * a / J
+        psiJJ = 5.0 * c1 / 9.0 * a / (J * J) * I1 + 14.0 * c2 / 9.0 * a * a / (J * J) * I2
+        s_kron = 2.0 * psi1 + 2.0 * psi2 * I1
+        s_HH = psiJJ + psiJ / J
+        s_sw = psiJ / J
+        for i in range(2):
+            for j in range(2):
+                for k in range(2):
+                    for m in range(2):  # m is the l of the docstring
+                        e = (4.0 * psi2 * F[i, j] * F[k, m] + s_HH * H[i, j] * H[k, m]
+                             + 2.0 * psi1J * (F[i, j] * H[k, m] + H[i, j] * F[k, m])
+                             + psi2J * (dI2[i, j] * H[k, m] + H[i, j] * dI2[k, m])
+                             - 2.0 * psi2 * F[i, m] * F[k, j] - s_sw * H[i, m] * H[k, j])
+                        if i == k:
+                            e -= 2.0 * psi2 * C[m, j]
+                            if j == m:
+                                e += s_kron
+                        if j == m:
+                            e -= 2.0 * psi2 * b[i, k]
+                        A[2 * i + j, 2 * k + m] = e
+    return J
+
+
+@numba.njit(cache=True)
+def _element(e, verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, tangent, K, r):  # noqa: ANN001, ANN202
+    """Element residual ``r`` and, if ``tangent``, matrix ``K`` (11 local DOFs: 6 vertex
+    displacements ``2 a + i``, 3 pressures, 2 bubble components) of element ``e`` at the
+    state ``x``."""
+    F = np.empty((2, 2))
+    P = np.empty((2, 2))
+    H = np.empty((2, 2))
+    A = np.empty((4, 4))
+    C = np.empty((2, 2))
+    b = np.empty((2, 2))
+    dI2 = np.empty((2, 2))
+    T1 = np.empty((4, 4, 2))
+    U = np.empty((4, 2))
+    Pn = np.empty(3)
+    for i in range(2):
+        for a in range(3):
+            U[a, i] = x[i * nH1 + verts[e, a]]
+        U[3, i] = x[i * nH1 + nv + e]
+    for c in range(3):
+        Pn[c] = x[zoff[e] + verts[e, c]]
+    r[:] = 0.0
+    if tangent:
+        K[:, :] = 0.0
+    for q in range(L.shape[0]):
+        for i in range(2):
+            for j in range(2):
+                s = 1.0 if i == j else 0.0
+                for a in range(4):
+                    s += U[a, i] * G[e, q, a, j]
+                F[i, j] = s
+        p = L[q, 0] * Pn[0] + L[q, 1] * Pn[1] + L[q, 2] * Pn[2]
+        J = plane_strain(F, p, c1[e], c2[e], P, H, A, C, b, dI2, tangent)
+        w = Wq[e, q]
+        for a in range(4):
+            ra = 2 * a if a < 3 else 9
+            for i in range(2):
+                r[ra + i] += w * (P[i, 0] * G[e, q, a, 0] + P[i, 1] * G[e, q, a, 1])
+        for c in range(3):
+            r[6 + c] += w * (J - Js_t[e]) * L[q, c]
+        if not tangent:
+            continue
+        for ij in range(4):  # T1[ij, b, k] = sum_l A[ij, kl] dN_b/dX_l
+            for bb in range(4):
+                for k in range(2):
+                    T1[ij, bb, k] = (A[ij, 2 * k] * G[e, q, bb, 0]
+                                     + A[ij, 2 * k + 1] * G[e, q, bb, 1])
+        for a in range(4):
+            ra = 2 * a if a < 3 else 9
+            for i in range(2):
+                for bb in range(4):
+                    rb = 2 * bb if bb < 3 else 9
+                    for k in range(2):
+                        K[ra + i, rb + k] += w * (G[e, q, a, 0] * T1[2 * i, bb, k]
+                                                  + G[e, q, a, 1] * T1[2 * i + 1, bb, k])
+                hg = w * (H[i, 0] * G[e, q, a, 0] + H[i, 1] * G[e, q, a, 1])
+                for c in range(3):
+                    K[ra + i, 6 + c] += hg * L[q, c]
+                    K[6 + c, ra + i] += hg * L[q, c]
+
+
+@numba.njit(cache=True)
+def _residual(verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, R):  # noqa: ANN001, ANN202
+    """``R`` (full DOF numbering, zeroed by the caller) of all elements at the state ``x``
+    (NaN terms where an element folds)."""
+    K = np.empty((1, 1))
+    r = np.empty(11)
+    for e in range(verts.shape[0]):
+        _element(e, verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, False, K, r)
+        for i in range(2):
+            for a in range(3):
+                R[i * nH1 + verts[e, a]] += r[2 * a + i]
+            R[i * nH1 + nv + e] += r[9 + i]
+        for c in range(3):
+            R[zoff[e] + verts[e, c]] += r[6 + c]
+
+
+@numba.njit(cache=True)
+def _tangent(verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, slots, data, Kbb_inv, E):  # noqa: ANN001, ANN202
+    """Condensed element matrices (the 9 external DOFs, the 2 bubble components condensed)
+    added into ``data`` at ``slots`` (per element, the 9 x 9 positions in the CSR data);
+    ``E = -K_bb^-1 K_be`` and ``K_bb^-1`` per element. Returns the number of elements with
+    a singular bubble block."""
+    K = np.empty((11, 11))
+    r = np.empty(11)
+    bad = 0
+    for e in range(verts.shape[0]):
+        _element(e, verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, True, K, r)
+        det = K[9, 9] * K[10, 10] - K[9, 10] * K[10, 9]
+        if det == 0.0:
+            bad += 1
+            continue
+        Kbb_inv[e, 0, 0] = K[10, 10] / det
+        Kbb_inv[e, 0, 1] = -K[9, 10] / det
+        Kbb_inv[e, 1, 0] = -K[10, 9] / det
+        Kbb_inv[e, 1, 1] = K[9, 9] / det
+        for i in range(2):
+            for m in range(9):
+                E[e, i, m] = -(Kbb_inv[e, i, 0] * K[9, m] + Kbb_inv[e, i, 1] * K[10, m])
+        for m in range(9):
+            for n in range(9):
+                data[slots[e, m, n]] += K[m, n] + K[m, 9] * E[e, 0, n] + K[m, 10] * E[e, 1, n]
+    return bad
+
+
+@numba.njit(cache=True)
+def _element_systems(elements, verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, tangent,  # noqa: ANN001, ANN202
+                     K, r):
+    """Uncondensed residuals ``r[k]`` and matrices ``K[k]`` of ``elements[k]`` (local order
+    of :func:`_element`)."""
+    Ke = np.empty((11, 11))
+    re = np.empty(11)
+    for k in range(len(elements)):
+        _element(elements[k], verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, tangent, Ke, re)
+        r[k] = re
+        if tangent:
+            K[k] = Ke
+
+
+@numba.njit(cache=True)
+def _slots(ext, indptr, indices):  # noqa: ANN001, ANN202
+    """Position in the CSR data of every element's DOF pair ``(ext[e, m], ext[e, n])``."""
+    ne, k = ext.shape
+    out = np.empty((ne, k, k), dtype=np.int64)
+    for e in range(ne):
+        for m in range(k):
+            row = ext[e, m]
+            for n in range(k):
+                lo, hi = indptr[row], indptr[row + 1]
+                while lo < hi:  # bisection in the row's sorted columns
+                    mid = (lo + hi) // 2
+                    if indices[mid] < ext[e, n]:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                out[e, m, n] = lo
+    return out
+
+
+class PlaneMiniTangent(MiniTangent):
+    """Residual and condensed tangent of a 2D :class:`~brainbulge.solver.mixed.MixedForm`
+    (MINI, Mooney-Rivlin regions, straight or curved triangles) with the bubble operators
+    of :class:`~brainbulge.solver.fast.mini_tangent.MiniTangent`."""
+
+    #: :meth:`residual` and :meth:`element_systems` exist (the residual hotspot's local
+    #: problems use the latter)
+    has_residual = True
+
+    def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
+        mesh, fes = form.mesh, form.fes
+        self.form = form
+        self.verts, region = element_vertices(mesh)
+        nv, ne = mesh.nv, mesh.ne
+        self.nv, self.nH1, self.ndof = nv, fes.components[0].ndof // 2, fes.ndof
+        names = mesh.GetMaterials()
+        mats = form.problem.materials
+        self.c1 = np.array([mats[n].c1 for n in names])[region]
+        self.c2 = np.array([mats[n].c2 for n in names])[region]
+        self.Js = np.array([float(form.problem.swelling.get(n, 1.0)) for n in names])[region]
+        offsets = np.cumsum([0] + [s.ndof for s in fes.components])
+        zone_of_region = np.full(len(names), -1)
+        for z, pat in enumerate(form.pressure_zones):
+            rx = re.compile(f"^(?:{pat})$")
+            for r, n in enumerate(names):
+                if rx.match(n):
+                    zone_of_region[r] = z
+        self.zoff = offsets[1 + zone_of_region[region]].astype(np.int64)
+        self._check_dofs(fes)
+        self.G, self.Wq, self.L = _element_geometry(mesh, _bubble_constant(fes.components[0],
+                                                                           mesh))
+        self.Kbb_inv = np.zeros((ne, 2, 2))
+        self.E = np.zeros((ne, 2, 9))
+        self.bubble_dofs = np.arange(2)[None, :] * self.nH1 + nv + np.arange(ne)[:, None]
+        self.ext_dofs = np.concatenate(
+            [(np.arange(2)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 6),
+             self.zoff[:, None] + self.verts], axis=1)
+        self._pattern = _pattern(self.ext_dofs, self.ndof)
+        self._slots = _slots(self.ext_dofs, self._pattern.indptr, self._pattern.indices)
+
+    def _check_dofs(self, fes: ngs.FESpace) -> None:
+        """The DOF numbers assumed by the kernels against NGSolve's, for a few elements."""
+        ne = self.verts.shape[0]
+        for e in sorted({0, ne // 3, ne // 2, ne - 1}):
+            dofs = [d for d in fes.GetDofNrs(ngs.ElementId(ngs.VOL, e)) if d >= 0]
+            u = [i * self.nH1 + v for i in range(2) for v in (*self.verts[e], self.nv + e)]
+            p = [int(self.zoff[e] + v) for v in self.verts[e]]
+            if dofs[:8] != u or dofs[8:] != p:
+                raise ValueError(f"unexpected DOF numbering of element {e}: {dofs}")
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """``R(x)`` over all DOFs at the form's current load (NaN where an element folds,
+        as NGSolve's residual of such a state)."""
+        R = np.zeros(self.ndof)
+        _residual(self.verts, self.G, self.Wq, self.L, np.asarray(x), self.nH1, self.nv,
+                  self.zoff, self.c1, self.c2, self._Js_t(), R)
+        return R
+
+    def assemble(self, x: np.ndarray) -> sp.csr_matrix:
+        """The condensed tangent at the state ``x`` (full DOF vector) [force/length]."""
+        P = self._pattern
+        data = np.zeros(P.nnz)
+        bad = _tangent(self.verts, self.G, self.Wq, self.L, np.asarray(x), self.nH1, self.nv,
+                       self.zoff, self.c1, self.c2, self._Js_t(), self._slots, data,
+                       self.Kbb_inv, self.E)
+        if bad:
+            data[:] = np.nan
+        return sp.csr_matrix((data, P.indices, P.indptr), shape=P.shape)
+
+    def element_systems(self, elements: np.ndarray, x: np.ndarray, tangent: bool
+                        ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Residuals ``(n, 11)`` and, if ``tangent``, matrices ``(n, 11, 11)`` of
+        ``elements`` at the state ``x``, uncondensed, in the order of NGSolve's element DOFs
+        (``fes.GetDofNrs``: x of the 3 vertices and the bubble, y likewise, 3 pressures), as
+        its integrators' ``ApplyElementMatrix`` / ``CalcLinearizedElementMatrix`` give them."""
+        elements = np.asarray(elements, dtype=np.int64)
+        r = np.empty((len(elements), 11))
+        K = np.empty((len(elements) if tangent else 0, 11, 11))
+        _element_systems(elements, self.verts, self.G, self.Wq, self.L, np.asarray(x),
+                         self.nH1, self.nv, self.zoff, self.c1, self.c2, self._Js_t(),
+                         tangent, K, r)
+        r = r[:, NGSOLVE_ORDER]
+        return r, (K[:, NGSOLVE_ORDER][:, :, NGSOLVE_ORDER] if tangent else None)
+
+    def _Js_t(self) -> np.ndarray:
+        """``Js(t) = 1 + t (Js - 1)`` per element at the form's load ``t``."""
+        return 1.0 + self.form.load.Get() * (self.Js - 1.0)
+
+
+def applies(form) -> bool:  # noqa: ANN001 - MixedForm
+    """Whether :class:`PlaneMiniTangent` computes this form's residual and tangent: 2D MINI,
+    every region Mooney-Rivlin (the contact terms are added by Newton)."""
+    return (form.element == "mini" and form.dim == 2
+            and all(isinstance(m, MooneyRivlin) for m in form.problem.materials.values()))
+
+
+def _element_geometry(mesh: ngs.Mesh, cb: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Physical gradients ``G (ne, nq, 4, 2)`` of the three hats and the bubble, weights
+    ``w_q |det J_e| (ne, nq)`` and barycentrics ``(nq, 3)`` at NGSolve's rule of order
+    :data:`QUAD_ORDER`, from NGSolve's element maps (curved elements included)."""
+    ir = ngs.IntegrationRule(ngs.TRIG, QUAD_ORDER)
+    xi = np.array([p[:2] for p in ir.points])
+    w = np.array(list(ir.weights))
+    L = np.column_stack([xi[:, 0], xi[:, 1], 1.0 - xi[:, 0] - xi[:, 1]])
+    jac = np.asarray(ngs.specialcf.JacobianMatrix(2)(mesh.MapToAllElements(ir, ngs.VOL)))
+    jac = jac.reshape(mesh.ne, len(w), 2, 2)  # dX_r / dxi_c
+    det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+    inv_t = np.empty_like(jac)  # J^-T
+    inv_t[..., 0, 0] = jac[..., 1, 1] / det
+    inv_t[..., 0, 1] = -jac[..., 1, 0] / det
+    inv_t[..., 1, 0] = -jac[..., 0, 1] / det
+    inv_t[..., 1, 1] = jac[..., 0, 0] / det
+    ref = np.empty((len(w), 4, 2))  # reference gradients, the bubble's by the product rule
+    ref[:, :3] = _REF_GRAD
+    ref[:, 3] = cb * (L[:, [1]] * L[:, [2]] * _REF_GRAD[0] + L[:, [0]] * L[:, [2]]
+                      * _REF_GRAD[1] + L[:, [0]] * L[:, [1]] * _REF_GRAD[2])
+    G = np.einsum("eqrc,qac->eqar", inv_t, ref)
+    return np.ascontiguousarray(G), np.abs(det) * w, L
+
+
+def _bubble_constant(V: ngs.FESpace, mesh: ngs.Mesh) -> float:
+    """``c_B`` of NGSolve's triangle bubble ``B = c_B lambda_0 lambda_1 lambda_2`` (order-3
+    H1), from its values at two reference points of the first element."""
+    gf = ngs.GridFunction(V)
+    gf.vec.FV().NumPy()[mesh.nv] = 1.0  # the first element's bubble, x component
+    ir = ngs.IntegrationRule([(1 / 3, 1 / 3, 0), (0.2, 0.3, 0)], [1.0, 1.0])
+    vals = np.asarray(gf(mesh.MapToAllElements(ir, ngs.VOL)))[:2, 0]
+    cb = vals[0] * 27.0
+    if not np.isclose(vals[1], cb * 0.2 * 0.3 * 0.5, rtol=1e-10):
+        raise ValueError("NGSolve's triangle bubble is not c lambda_0 lambda_1 lambda_2")
+    return float(cb)
