@@ -12,6 +12,7 @@ of the resulting signed distance field (mm, negative inside) is the skull's inne
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.ndimage as ndi
@@ -28,6 +29,19 @@ class IntracranialEnvelope:
 
     sdf_mm: np.ndarray
     affine: np.ndarray
+
+    @cached_property
+    def spline_coefficients(self) -> np.ndarray:
+        """Cubic B-spline coefficients of ``sdf_mm`` (``ndi.spline_filter``, float64), made
+        once per envelope: every skull (each flap, the intact one) interpolates them, and
+        the filter takes ~0.7 s on the 1 mm template."""
+        return ndi.spline_filter(self.sdf_mm.astype(np.float64), order=3, mode="nearest")
+
+    def __getstate__(self) -> dict:
+        """Pickled (e.g. to a Dask worker) without the coefficients, which are made again."""
+        state = self.__dict__.copy()
+        state.pop("spline_coefficients", None)
+        return state
 
     @property
     def voxel_volume_mm3(self) -> float:

@@ -38,8 +38,7 @@ class RigidSkull:
         self.flap = flap
         self.edge_radius_mm = float(edge_radius_mm)
         self._inv = np.linalg.inv(envelope.affine)
-        sdf = envelope.sdf_mm.astype(np.float64)
-        self._coeffs = ndi.spline_filter(sdf, order=3, mode="nearest")
+        self._coeffs = envelope.spline_coefficients
 
     def envelope_distance(self, points_mm: np.ndarray,
                           gradient: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
