@@ -2,8 +2,8 @@
 
 The state ``x = (u, p)`` on the free DOFs, with the contact pressures ``lambda``, solves
 ``R(x) = 0``: the stationarity of MODEL.md section 2's Lagrangian (NGSolve's ``Variation``,
-or the closed forms of :mod:`brainbulge.solver.fast.mini_tangent` and, in 2D with the
-residual too, :mod:`brainbulge.solver.fast.mini_plane`) plus the contact forces
+or the closed forms of :mod:`brainbulge.solver.fast.mini_tangent` and, in 2D,
+:mod:`brainbulge.solver.fast.mini_plane`) plus the contact forces
 ``-B^T lambda`` and the complementarity of the active set (:mod:`brainbulge.solver.contact`).
 MINI's bubbles are condensed statically: the direction is solved on the vertex DOFs and
 extended into the bubbles.
@@ -35,7 +35,7 @@ class MixedEquations:
     def __init__(self, form: MixedForm, linear_solver: str = "pardiso") -> None:
         self.form = form
         self.linear: LinearSolver = make_linear_solver(linear_solver, form)
-        self.closed = None  # the closed-form tangent (and 2D residual), where it applies
+        self.closed = None  # the closed-form residual and tangent, where they apply
         if form.element == "mini":
             # (Numba, ~0.5 s: imported only where it may apply)
             from brainbulge.solver.fast import mini_plane, mini_tangent
@@ -99,7 +99,7 @@ class MixedEquations:
         """``R(x)`` (full DOF numbering) with the contact forces ``-B^T lambda`` at the
         current multipliers; also their complementarity residuals for :meth:`scaled_norm`."""
         t0 = time.perf_counter()
-        if self.closed is not None and self.closed.has_residual:
+        if self.closed is not None:
             self.res.FV().NumPy()[:] = self.closed.residual(x.FV().NumPy())
         else:
             with ngs.TaskManager():

@@ -1,8 +1,8 @@
 """The closed-form MINI tangent (:mod:`brainbulge.solver.fast.mini_tangent`).
 
-Its Hessian against finite differences of the closed-form stress, its assembled and
-condensed matrix and bubble operators against NGSolve's AD of the energy, and Newton's
-path with it against the path with NGSolve's tangent.
+Its Hessian against finite differences of the closed-form stress, its residual, assembled
+and condensed matrix and bubble operators against NGSolve's AD of the energy, and Newton's
+path with it against the path with NGSolve's residual and tangent.
 """
 
 from __future__ import annotations
@@ -91,6 +91,15 @@ def test_tangent_and_bubble_operators_equal_ngsolves(form_and_state) -> None:
         assert np.linalg.norm(mine(r.FV().NumPy()) - ref) <= 1e-10 * np.linalg.norm(ref)
 
 
+def test_residual_equals_ngsolves(form_and_state) -> None:
+    form, mt = form_and_state
+    res = form.gfu.vec.CreateVector()
+    form.a.Apply(form.gfu.vec, res)
+    ref = res.FV().NumPy()
+    assert np.abs(ref).max() > 1
+    assert np.abs(mt.residual(form.gfu.vec.FV().NumPy()) - ref).max() <= 1e-13 * np.abs(ref).max()
+
+
 def test_a_degenerate_element_gives_a_non_finite_tangent(form_and_state) -> None:
     form, _ = form_and_state
     mt = MiniTangent(form)
@@ -98,6 +107,7 @@ def test_a_degenerate_element_gives_a_non_finite_tangent(form_and_state) -> None
     v = mt.verts[0]
     mt.coords[v[0]] = mt.coords[v[1]]  # element 0 flattened
     assert not np.isfinite(mt.assemble(form.gfu.vec.FV().NumPy()).data).any()
+    assert not np.isfinite(mt.residual(form.gfu.vec.FV().NumPy())).all()
 
 
 def test_newton_takes_the_same_path_with_either_tangent() -> None:
@@ -107,7 +117,7 @@ def test_newton_takes_the_same_path_with_either_tangent() -> None:
         ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10))
         assert ns.closed is not None
         if not closed:
-            ns.closed = None  # the plain path: NGSolve's AssembleLinearization
+            ns.closed = None  # the plain path: NGSolve's Apply and AssembleLinearization
         res = ns.solve()
         assert res.converged
         results.append((res.newton_iterations, form.gfu.vec.FV().NumPy().copy()))

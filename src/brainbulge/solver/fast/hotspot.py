@@ -252,7 +252,7 @@ class LocalProblem:
                       for fe, tr, dofs, bfis in self.items]
         closed = solver.closed
         # the 2D closed form's element systems, all elements at once (else NGSolve's, one by one)
-        self.closed = closed if closed is not None and closed.has_residual else None
+        self.closed = closed if closed is not None and closed.has_element_systems else None
         if self.closed is not None:
             self.elements = np.asarray(elements, dtype=np.int64)
             self.loc = np.array([item[4] for item in self.items])

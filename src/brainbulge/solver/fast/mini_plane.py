@@ -36,7 +36,8 @@ import scipy.sparse as sp
 
 from brainbulge.geometry.ngsolve_arrays import element_vertices
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
-from brainbulge.solver.fast.mini_tangent import MiniTangent, _pattern
+from brainbulge.solver.fast.element_graph import element_pattern
+from brainbulge.solver.fast.mini_tangent import MiniTangent
 
 #: order of NGSolve's integration rule for the 2D MINI energy (vertex P1 + cubic bubble)
 QUAD_ORDER = 5
@@ -47,7 +48,7 @@ NGSOLVE_ORDER = np.array([0, 2, 4, 9, 1, 3, 5, 10, 6, 7, 8])
 _REF_GRAD = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def plane_strain(F, p, c1, c2, P, H, A, C, b, dI2, tangent):  # noqa: ANN001, ANN202 - kernel
     """``P = dW/dF``, ``H = cof F`` and, if ``tangent``, ``A = d2W/dF2`` (row ``2 i + j``,
     column ``2 k + l``) of the in-plane ``F`` (2x2, ``F_33 = 1``); returns ``J``. The
@@ -242,9 +243,7 @@ class PlaneMiniTangent(MiniTangent):
     (MINI, Mooney-Rivlin regions, straight or curved triangles) with the bubble operators
     of :class:`~brainbulge.solver.fast.mini_tangent.MiniTangent`."""
 
-    #: :meth:`residual` and :meth:`element_systems` exist (the residual hotspot's local
-    #: problems use the latter)
-    has_residual = True
+    has_element_systems = True
 
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         mesh, fes = form.mesh, form.fes
@@ -274,7 +273,7 @@ class PlaneMiniTangent(MiniTangent):
         self.ext_dofs = np.concatenate(
             [(np.arange(2)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 6),
              self.zoff[:, None] + self.verts], axis=1)
-        self._pattern = _pattern(self.ext_dofs, self.ndof)
+        self._pattern = element_pattern(self.ext_dofs, self.ndof)
         self._slots = _slots(self.ext_dofs, self._pattern.indptr, self._pattern.indices)
 
     def _check_dofs(self, fes: ngs.FESpace) -> None:
@@ -320,10 +319,6 @@ class PlaneMiniTangent(MiniTangent):
                          tangent, K, r)
         r = r[:, NGSOLVE_ORDER]
         return r, (K[:, NGSOLVE_ORDER][:, :, NGSOLVE_ORDER] if tangent else None)
-
-    def _Js_t(self) -> np.ndarray:
-        """``Js(t) = 1 + t (Js - 1)`` per element at the form's load ``t``."""
-        return 1.0 + self.form.load.Get() * (self.Js - 1.0)
 
 
 def applies(form) -> bool:  # noqa: ANN001 - MixedForm

@@ -1,4 +1,4 @@
-"""The condensed MINI tangent of a Mooney-Rivlin solid, element by element in compiled loops.
+"""The MINI residual and condensed tangent of a Mooney-Rivlin solid, in compiled loops (3D).
 
 NGSolve's ``Variation`` forms the Hessian of the energy by automatic differentiation: about
 65 second-order AD evaluations of the energy per integration point (9 + 1 proxy components,
@@ -36,7 +36,10 @@ MINI), displacement shape functions ``N_a`` (the 4 barycentric ``lambda_a`` and 
 
 and the bubble condensed statically: ``S = K_ee - K_eb K_bb^-1 K_be``, with
 ``E = -K_bb^-1 K_be`` and ``K_bb^-1`` kept for the bubble part of a Newton step
-(NGSolve's ``harmonic_extension``, its transpose, and ``inner_solve``).
+(NGSolve's ``harmonic_extension``, its transpose, and ``inner_solve``). The residual is
+``R_(ai) = sum_q w_q P_ij dN_a/dX_j`` and ``R_c = sum_q w_q (J - Js(t)) lambda_c`` with
+``P = dW/dF = 2 psi1 F + psi2 dI2 + psiJ H`` (7x faster than NGSolve's compiled ``Apply``
+on a 146-tet mesh; a 21k-tet solve's assembly 3.0 -> 2.3 s).
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ import scipy.sparse as sp
 
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
+from brainbulge.solver.fast.element_graph import colour_elements, element_pattern
 from brainbulge.solver.threads import available_cores
 
 log = logging.getLogger(__name__)
@@ -143,25 +147,136 @@ def _inverse3(M, out):  # noqa: ANN001, ANN202 - Numba kernel
     return det
 
 
-@numba.njit(cache=True)
-def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa: ANN001, ANN202
-    """Element matrix ``K`` (19 x 19: 12 vertex displacements ``3 a + i``, 4 pressures,
-    3 bubble components) of element ``e`` at the state ``x``, and its 16 external global
-    DOFs ``gd``. Returns False for a degenerate element (zero volume)."""
+@numba.njit(cache=True, inline="always")
+def _vertex_gradients(e, verts, coords, g):  # noqa: ANN001, ANN202 - Numba kernel
+    """Rows 0-3 of ``g`` (5 x 3): the gradients of the barycentrics of element ``e``
+    (``T^-1`` has those of lambda_1..3, lambda_0's is minus their sum); returns ``det T``
+    (zero for a degenerate element, ``g`` then untouched)."""
     T = np.empty((3, 3))
     for i in range(3):
         for d in range(3):
             T[d, i] = coords[verts[e, i + 1], d] - coords[verts[e, 0], d]
     Tinv = np.empty((3, 3))
     det = _inverse3(T, Tinv)
+    if det != 0.0:
+        for i in range(3):
+            for d in range(3):
+                g[i + 1, d] = Tinv[i, d]
+        for d in range(3):
+            g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
+    return det
+
+
+@numba.njit(cache=True, inline="always")
+def _at_point(L, g, U, P, cb, F):  # noqa: ANN001, ANN202 - Numba kernel
+    """At the point of barycentrics ``L``: the bubble's gradient into ``g[4]``, ``F`` from
+    the displacement coefficients ``U`` (4 vertices and the bubble); returns ``p``."""
+    for d in range(3):  # grad B = c_B sum_i (prod_{j != i} lambda_j) grad lambda_i
+        s = 0.0
+        for i in range(4):
+            prod = 1.0
+            for j in range(4):
+                if j != i:
+                    prod *= L[j]
+            s += prod * g[i, d]
+        g[4, d] = cb * s
+    for i in range(3):
+        for j in range(3):
+            s = 1.0 if i == j else 0.0
+            for a in range(5):
+                s += U[a, i] * g[a, j]
+            F[i, j] = s
+    return L[0] * P[0] + L[1] * P[1] + L[2] * P[2] + L[3] * P[3]
+
+
+@numba.njit(cache=True, inline="always")
+def stress(F, p, c1, c2, P, H, C):  # noqa: ANN001, ANN202 - Numba kernel
+    """``P = dW/dF = 2 psi1 F + psi2 dI2 + psiJ H`` and ``H = cof F`` (3x3) of the
+    module's energy, ``C`` a work array; returns ``J``."""
+    H[0, 0] = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
+    H[0, 1] = F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2]
+    H[0, 2] = F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]
+    H[1, 0] = F[0, 2] * F[2, 1] - F[0, 1] * F[2, 2]
+    H[1, 1] = F[0, 0] * F[2, 2] - F[0, 2] * F[2, 0]
+    H[1, 2] = F[0, 1] * F[2, 0] - F[0, 0] * F[2, 1]
+    H[2, 0] = F[0, 1] * F[1, 2] - F[0, 2] * F[1, 1]
+    H[2, 1] = F[0, 2] * F[1, 0] - F[0, 0] * F[1, 2]
+    H[2, 2] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+    J = F[0, 0] * H[0, 0] + F[0, 1] * H[0, 1] + F[0, 2] * H[0, 2]
+    CC = 0.0
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = F[0, i] * F[0, j] + F[1, i] * F[1, j] + F[2, i] * F[2, j]
+            CC += C[i, j] * C[i, j]
+    I1 = C[0, 0] + C[1, 1] + C[2, 2]
+    I2 = 0.5 * (I1 * I1 - CC)
+    a = J ** (-2.0 / 3.0)  # NaN for J <= 0, as NGSolve's
+    psi1 = 0.5 * c1 * a
+    psi2 = 0.5 * c2 * a * a
+    psiJ = -c1 / 3.0 * a / J * I1 - 2.0 * c2 / 3.0 * a * a / J * I2 + p
+    for i in range(3):
+        for j in range(3):
+            FC = F[i, 0] * C[0, j] + F[i, 1] * C[1, j] + F[i, 2] * C[2, j]
+            P[i, j] = 2.0 * psi1 * F[i, j] + 2.0 * psi2 * (I1 * F[i, j] - FC) + psiJ * H[i, j]
+    return J
+
+
+@numba.njit(cache=True, parallel=True)
+def _residual(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, Js_t, cb, qp, R):  # noqa: ANN001, ANN202
+    """``R`` (all DOFs, zeroed by the caller) summed element by element over the colours of
+    :func:`_assemble` (the pressure and bubble terms as ``Variation`` has them): ``R_(ai) =
+    sum_q w_q P_ij dN_a/dX_j``, ``R_c = sum_q w_q (J - Js_t) lambda_c``. A degenerate
+    element makes its DOFs' entries NaN."""
+    for c in range(len(chunks) - 1):
+        lo, hi = chunks[c], chunks[c + 1]
+        n_par = 8
+        for t in numba.prange(n_par):
+            g = np.empty((5, 3))
+            U = np.empty((5, 3))
+            Pn = np.empty(4)
+            F = np.empty((3, 3))
+            P = np.empty((3, 3))
+            H = np.empty((3, 3))
+            C = np.empty((3, 3))
+            r = np.empty(19)  # 3 a + i (vertices), 12 + c (pressures), 16 + i (bubble)
+            for s in range(lo + (hi - lo) * t // n_par, lo + (hi - lo) * (t + 1) // n_par):
+                e = order[s]
+                for i in range(3):
+                    for a in range(4):
+                        U[a, i] = x[i * nH1 + verts[e, a]]
+                    U[4, i] = x[i * nH1 + nv + e]
+                for a in range(4):
+                    Pn[a] = x[zoff[e] + verts[e, a]]
+                det = _vertex_gradients(e, verts, coords, g)
+                r[:] = 0.0 if det != 0.0 else np.nan
+                w = abs(det) / 6.0 / 4.0
+                for q in range(qp.shape[0] if det != 0.0 else 0):
+                    p = _at_point(qp[q], g, U, Pn, cb, F)
+                    J = stress(F, p, c1[e], c2[e], P, H, C)
+                    for a in range(5):
+                        ra = 3 * a if a < 4 else 16
+                        for i in range(3):
+                            r[ra + i] += w * (P[i, 0] * g[a, 0] + P[i, 1] * g[a, 1]
+                                              + P[i, 2] * g[a, 2])
+                    for cc in range(4):
+                        r[12 + cc] += w * (J - Js_t[e]) * qp[q, cc]
+                for i in range(3):
+                    for a in range(4):
+                        R[i * nH1 + verts[e, a]] += r[3 * a + i]
+                    R[i * nH1 + nv + e] += r[16 + i]
+                for a in range(4):
+                    R[zoff[e] + verts[e, a]] += r[12 + a]
+
+
+@numba.njit(cache=True)
+def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa: ANN001, ANN202
+    """Element matrix ``K`` (19 x 19: 12 vertex displacements ``3 a + i``, 4 pressures,
+    3 bubble components) of element ``e`` at the state ``x``, and its 16 external global
+    DOFs ``gd``. Returns False for a degenerate element (zero volume)."""
+    g = np.empty((5, 3))
+    det = _vertex_gradients(e, verts, coords, g)
     if det == 0.0:
         return False
-    g = np.empty((5, 3))  # rows of T^-1 are grad lambda_1..3; grad lambda_0 = -their sum
-    for i in range(3):
-        for d in range(3):
-            g[i + 1, d] = Tinv[i, d]
-    for d in range(3):
-        g[0, d] = -(g[1, d] + g[2, d] + g[3, d])
     w = abs(det) / 6.0 / 4.0
     U = np.empty((5, 3))  # displacement coefficients: 4 vertices and the bubble
     for i in range(3):
@@ -181,22 +296,7 @@ def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa
     T1 = np.empty((9, 5, 3))
     for q in range(qp.shape[0]):
         L = qp[q]
-        for d in range(3):  # grad B = c_B sum_i (prod_{j != i} lambda_j) grad lambda_i
-            s = 0.0
-            for i in range(4):
-                prod = 1.0
-                for j in range(4):
-                    if j != i:
-                        prod *= L[j]
-                s += prod * g[i, d]
-            g[4, d] = cb * s
-        for i in range(3):
-            for j in range(3):
-                s = 1.0 if i == j else 0.0
-                for a in range(5):
-                    s += U[a, i] * g[a, j]
-                F[i, j] = s
-        p = L[0] * P[0] + L[1] * P[1] + L[2] * P[2] + L[3] * P[3]
+        p = _at_point(L, g, U, P, cb, F)
         hessian(F, p, c1[e], c2[e], A, H)
         for r in range(9):  # T1[ij, b, k] = sum_l A[ij, kl] dN_b/dX_l
             for bb in range(5):
@@ -267,32 +367,6 @@ def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  #
     return bad
 
 
-@numba.njit(cache=True)
-def _colour(verts, nv):  # noqa: ANN001, ANN202
-    """Greedy colouring of the elements: no two of one colour share a vertex (at most 128
-    colours; -1 for an element that found none free)."""
-    ne = verts.shape[0]
-    used = np.zeros((nv, 2), dtype=np.uint64)
-    colour = np.empty(ne, dtype=np.int64)
-    for e in range(ne):
-        m0 = np.uint64(0)
-        m1 = np.uint64(0)
-        for a in range(verts.shape[1]):
-            m0 |= used[verts[e, a], 0]
-            m1 |= used[verts[e, a], 1]
-        c = -1
-        for k in range(128):
-            word = m0 if k < 64 else m1
-            if (word >> np.uint64(k % 64)) & np.uint64(1) == 0:
-                c = k
-                break
-        colour[e] = c
-        if c >= 0:
-            for a in range(verts.shape[1]):
-                used[verts[e, a], c // 64] |= np.uint64(1) << np.uint64(c % 64)
-    return colour
-
-
 class MiniTangent:
     """The condensed tangent of a :class:`~brainbulge.solver.mixed.MixedForm` (3D MINI,
     Mooney-Rivlin regions, straight tets) and its bubble operators.
@@ -304,8 +378,8 @@ class MiniTangent:
     for that tangent.
     """
 
-    #: whether :meth:`residual` exists (3D: the residual is NGSolve's, compiled)
-    has_residual = False
+    #: :meth:`element_systems` (for the residual hotspot's local problems): 2D only
+    has_element_systems = False
 
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         t0 = time.perf_counter()
@@ -321,6 +395,8 @@ class MiniTangent:
         mats = form.problem.materials
         self.c1 = np.array([mats[n].c1 for n in names])[region]
         self.c2 = np.array([mats[n].c2 for n in names])[region]
+        self.form = form
+        self.Js = np.array([float(form.problem.swelling.get(n, 1.0)) for n in names])[region]
         # each element's pressure space: the zone (regex over region names) it belongs to
         offsets = np.cumsum([0] + [s.ndof for s in fes.components])
         zone_of_region = np.full(len(names), -1)
@@ -332,7 +408,7 @@ class MiniTangent:
         self.zoff = offsets[1 + zone_of_region[region]].astype(np.int64)
         self._check_dofs(fes)
         self.cb = _bubble_constant(V, mesh)
-        colour = _colour(self.verts, nv)
+        colour = colour_elements(self.verts, nv)
         if (colour < 0).any():
             raise ValueError("more than 128 colours needed for the element loop")
         self.order = np.argsort(colour, kind="stable").astype(np.int64)
@@ -344,7 +420,7 @@ class MiniTangent:
         self.ext_dofs = np.concatenate(
             [(np.arange(3)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 12),
              self.zoff[:, None] + self.verts], axis=1)
-        self._pattern = _pattern(self.ext_dofs, self.ndof)
+        self._pattern = element_pattern(self.ext_dofs, self.ndof)
         numba.set_num_threads(min(available_cores(), numba.config.NUMBA_NUM_THREADS))
         log.info("closed-form MINI tangent: %d elements in %d colours, pattern %d non-zeros "
                  "(%.1f s)", ne, n_col, self._pattern.nnz, time.perf_counter() - t0)
@@ -371,6 +447,18 @@ class MiniTangent:
             log.warning("%d degenerate elements in the tangent", bad)
             data[:] = np.nan
         return sp.csr_matrix((data, P.indices, P.indptr), shape=P.shape)
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """``R(x)`` over all DOFs at the form's current load (NaN where an element folds,
+        as NGSolve's residual of such a state)."""
+        R = np.zeros(self.ndof)
+        _residual(self.order, self.chunks, self.verts, self.coords, np.asarray(x), self.nH1,
+                  self.nv, self.zoff, self.c1, self.c2, self._Js_t(), self.cb, QUAD_POINTS, R)
+        return R
+
+    def _Js_t(self) -> np.ndarray:
+        """``Js(t) = 1 + t (Js - 1)`` per element at the form's load ``t``."""
+        return 1.0 + self.form.load.Get() * (self.Js - 1.0)
 
     def extend_trans(self, r: np.ndarray) -> np.ndarray:
         """``E^T r_b`` summed into the external DOFs (``harmonic_extension_trans``)."""
@@ -413,50 +501,3 @@ def _bubble_constant(V: ngs.FESpace, mesh: ngs.Mesh) -> float:
     if not np.isclose(val2, cb * np.prod(bary), rtol=1e-10):
         raise ValueError("NGSolve's tet bubble is not c lambda_0 lambda_1 lambda_2 lambda_3")
     return float(cb)
-
-
-@numba.njit(cache=True, parallel=True)
-def _pattern_rows(ext, ndof, ptr, adj, maxlen, nthreads, count_only, indptr, indices):  # noqa: ANN001, ANN202
-    """Row lengths (``count_only``) or sorted column indices of the pattern of all DOF pairs
-    of every element; ``ptr``/``adj``: the elements of each DOF. A marker per thread and
-    DOF marks the columns found for the current row."""
-    lengths = np.zeros(ndof, dtype=np.int64)
-    marker = np.full((nthreads, ndof), -1, dtype=np.int64)
-    for t in numba.prange(nthreads):
-        buf = np.empty(maxlen, dtype=np.int64)
-        for d in range(t * ndof // nthreads, (t + 1) * ndof // nthreads):
-            n = 0
-            for k in range(ptr[d], ptr[d + 1]):
-                e = adj[k]
-                for m in range(ext.shape[1]):
-                    c = ext[e, m]
-                    if marker[t, c] != d:
-                        marker[t, c] = d
-                        buf[n] = c
-                        n += 1
-            lengths[d] = n
-            if not count_only:
-                cols = np.sort(buf[:n])
-                for k in range(n):
-                    indices[indptr[d] + k] = cols[k]
-    return lengths
-
-
-def _pattern(ext: np.ndarray, ndof: int) -> sp.csr_matrix:
-    """The sparsity pattern of the condensed tangent: every pair of an element's external
-    DOFs ``ext`` (ne x 16), as NGSolve's matrix graph has it (sorted columns, int32)."""
-    ne, m = ext.shape
-    flat = ext.ravel()
-    ptr = np.zeros(ndof + 1, dtype=np.int64)
-    np.cumsum(np.bincount(flat, minlength=ndof), out=ptr[1:])
-    adj = (np.argsort(flat, kind="stable") // m).astype(np.int64)  # the elements of each DOF
-    dummy = np.zeros(1, dtype=np.int64)
-    maxlen = int(np.diff(ptr).max()) * m  # a row's candidate columns, duplicates included
-    nt = numba.get_num_threads()
-    lengths = _pattern_rows(ext, ndof, ptr, adj, maxlen, nt, True, dummy, dummy)
-    indptr = np.zeros(ndof + 1, dtype=np.int64)
-    np.cumsum(lengths, out=indptr[1:])
-    indices = np.empty(indptr[-1], dtype=np.int64)
-    _pattern_rows(ext, ndof, ptr, adj, maxlen, nt, False, indptr, indices)
-    return sp.csr_matrix((np.zeros(len(indices)), indices.astype(np.int32),
-                          indptr.astype(np.int32)), shape=(ndof, ndof))
