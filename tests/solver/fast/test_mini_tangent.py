@@ -15,6 +15,7 @@ from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.fast.mini_tangent import MiniTangent, applies, hessian
 
 SOFT = MooneyRivlin(0.03, 33.3)
@@ -141,3 +142,19 @@ def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(monkeypatch, caplo
     ns = NewtonSolver(MixedForm(_problem(), element="mini"))
     assert ns.closed is None
     assert "closed-form tangent not used" in caplog.text
+
+
+def test_hotspot_local_problems_take_the_same_element_systems_as_ngsolves(form_and_state) -> None:
+    form, mt = form_and_state
+    solver = NewtonSolver(form)
+    assert solver.closed is not None
+    relaxation = HotspotRelaxation(solver)
+    local = relaxation.local_problem(np.array([int(mt.verts[0, 0])]))
+    assert local.closed is solver.closed and len(local.elements) > 5
+    X = form.gfu.vec.FV().NumPy()
+    R, K = local.assemble(X, local.multipliers(), tangent=True)
+    local.closed = None  # NGSolve's integrators, element by element
+    R_ad, K_ad = local.assemble(X, local.multipliers(), tangent=True)
+    assert np.abs(R_ad).max() > 0
+    assert np.abs(R - R_ad).max() <= 1e-12 * np.abs(R_ad).max()
+    assert abs(K - K_ad).max() <= 1e-12 * abs(K_ad).max()

@@ -20,9 +20,9 @@ After an accepted Newton step, with ``r_v`` the scaled residual of the DOFs at v
 - local problem: ``R_i(x_P, x_rest) = 0`` for the displacement and pressure DOFs of ``P``
   and the bubbles of the elements around ``P`` (their equations involve those elements
   only), solved by Newton with a backtracking line search, element matrices from NGSolve's
-  integrators (``CalcLinearizedElementMatrix`` / ``ApplyElementMatrix``; in 2D from the
-  closed form of :mod:`brainbulge.solver.fast.mini_plane`), the sparse local tangent
-  factorised by SuperLU.
+  integrators (``CalcLinearizedElementMatrix`` / ``ApplyElementMatrix``) or, where it
+  applies, the closed form (:mod:`brainbulge.solver.fast.mini_tangent`, ``mini_plane``),
+  the sparse local tangent factorised by SuperLU.
 
 The result is kept only when the global residual norm falls and no contact point of the
 patch has come to press on the skull; else the state is restored. Written by hand: no
@@ -250,9 +250,8 @@ class LocalProblem:
         pos = {int(d): i for i, d in enumerate(self.dofs)}
         self.items = [(fe, tr, dofs, bfis, np.array([pos.get(int(d), -1) for d in dofs]))
                       for fe, tr, dofs, bfis in self.items]
-        closed = solver.closed
-        # the 2D closed form's element systems, all elements at once (else NGSolve's, one by one)
-        self.closed = closed if closed is not None and closed.has_element_systems else None
+        # the closed form's element systems, all elements at once (else NGSolve's, one by one)
+        self.closed = solver.closed
         if self.closed is not None:
             self.elements = np.asarray(elements, dtype=np.int64)
             self.loc = np.array([item[4] for item in self.items])

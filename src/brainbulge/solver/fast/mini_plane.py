@@ -243,7 +243,7 @@ class PlaneMiniTangent(MiniTangent):
     (MINI, Mooney-Rivlin regions, straight or curved triangles) with the bubble operators
     of :class:`~brainbulge.solver.fast.mini_tangent.MiniTangent`."""
 
-    has_element_systems = True
+    ngsolve_order = NGSOLVE_ORDER
 
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         mesh, fes = form.mesh, form.fes
@@ -305,20 +305,10 @@ class PlaneMiniTangent(MiniTangent):
             data[:] = np.nan
         return sp.csr_matrix((data, P.indices, P.indptr), shape=P.shape)
 
-    def element_systems(self, elements: np.ndarray, x: np.ndarray, tangent: bool
-                        ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Residuals ``(n, 11)`` and, if ``tangent``, matrices ``(n, 11, 11)`` of
-        ``elements`` at the state ``x``, uncondensed, in the order of NGSolve's element DOFs
-        (``fes.GetDofNrs``: x of the 3 vertices and the bubble, y likewise, 3 pressures), as
-        its integrators' ``ApplyElementMatrix`` / ``CalcLinearizedElementMatrix`` give them."""
-        elements = np.asarray(elements, dtype=np.int64)
-        r = np.empty((len(elements), 11))
-        K = np.empty((len(elements) if tangent else 0, 11, 11))
-        _element_systems(elements, self.verts, self.G, self.Wq, self.L, np.asarray(x),
-                         self.nH1, self.nv, self.zoff, self.c1, self.c2, self._Js_t(),
-                         tangent, K, r)
-        r = r[:, NGSOLVE_ORDER]
-        return r, (K[:, NGSOLVE_ORDER][:, :, NGSOLVE_ORDER] if tangent else None)
+    def _element_systems(self, elements: np.ndarray, x: np.ndarray, tangent: bool,
+                         K: np.ndarray, r: np.ndarray) -> None:
+        _element_systems(elements, self.verts, self.G, self.Wq, self.L, x, self.nH1, self.nv,
+                         self.zoff, self.c1, self.c2, self._Js_t(), tangent, K, r)
 
 
 def applies(form) -> bool:  # noqa: ANN001 - MixedForm

@@ -221,51 +221,73 @@ def stress(F, p, c1, c2, P, H, C):  # noqa: ANN001, ANN202 - Numba kernel
     return J
 
 
+@numba.njit(cache=True)
+def _element_residual(e, verts, coords, x, nH1, nv, zoff, c1, c2, Js_t, cb, qp, r,  # noqa: ANN001, ANN202
+                      g, U, Pn, F, P, H, C):
+    """Residual ``r`` (19, the local order of :func:`_element`) of element ``e`` at ``x``:
+    ``r_(ai) = sum_q w_q P_ij dN_a/dX_j``, ``r_c = sum_q w_q (J - Js_t) lambda_c``; NaN for
+    a degenerate element. ``g`` ... ``C``: work arrays."""
+    for i in range(3):
+        for a in range(4):
+            U[a, i] = x[i * nH1 + verts[e, a]]
+        U[4, i] = x[i * nH1 + nv + e]
+    for a in range(4):
+        Pn[a] = x[zoff[e] + verts[e, a]]
+    det = _vertex_gradients(e, verts, coords, g)
+    r[:] = 0.0 if det != 0.0 else np.nan
+    w = abs(det) / 6.0 / 4.0
+    for q in range(qp.shape[0] if det != 0.0 else 0):
+        p = _at_point(qp[q], g, U, Pn, cb, F)
+        J = stress(F, p, c1[e], c2[e], P, H, C)
+        for a in range(5):
+            ra = 3 * a if a < 4 else 16
+            for i in range(3):
+                r[ra + i] += w * (P[i, 0] * g[a, 0] + P[i, 1] * g[a, 1] + P[i, 2] * g[a, 2])
+        for c in range(4):
+            r[12 + c] += w * (J - Js_t[e]) * qp[q, c]
+
+
 @numba.njit(cache=True, parallel=True)
 def _residual(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, Js_t, cb, qp, R):  # noqa: ANN001, ANN202
     """``R`` (all DOFs, zeroed by the caller) summed element by element over the colours of
-    :func:`_assemble` (the pressure and bubble terms as ``Variation`` has them): ``R_(ai) =
-    sum_q w_q P_ij dN_a/dX_j``, ``R_c = sum_q w_q (J - Js_t) lambda_c``. A degenerate
-    element makes its DOFs' entries NaN."""
+    :func:`_assemble`."""
     for c in range(len(chunks) - 1):
         lo, hi = chunks[c], chunks[c + 1]
         n_par = 8
         for t in numba.prange(n_par):
-            g = np.empty((5, 3))
-            U = np.empty((5, 3))
-            Pn = np.empty(4)
-            F = np.empty((3, 3))
-            P = np.empty((3, 3))
-            H = np.empty((3, 3))
-            C = np.empty((3, 3))
-            r = np.empty(19)  # 3 a + i (vertices), 12 + c (pressures), 16 + i (bubble)
+            g, U = np.empty((5, 3)), np.empty((5, 3))
+            F, P, H, C = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+            Pn, r = np.empty(4), np.empty(19)
             for s in range(lo + (hi - lo) * t // n_par, lo + (hi - lo) * (t + 1) // n_par):
                 e = order[s]
-                for i in range(3):
-                    for a in range(4):
-                        U[a, i] = x[i * nH1 + verts[e, a]]
-                    U[4, i] = x[i * nH1 + nv + e]
-                for a in range(4):
-                    Pn[a] = x[zoff[e] + verts[e, a]]
-                det = _vertex_gradients(e, verts, coords, g)
-                r[:] = 0.0 if det != 0.0 else np.nan
-                w = abs(det) / 6.0 / 4.0
-                for q in range(qp.shape[0] if det != 0.0 else 0):
-                    p = _at_point(qp[q], g, U, Pn, cb, F)
-                    J = stress(F, p, c1[e], c2[e], P, H, C)
-                    for a in range(5):
-                        ra = 3 * a if a < 4 else 16
-                        for i in range(3):
-                            r[ra + i] += w * (P[i, 0] * g[a, 0] + P[i, 1] * g[a, 1]
-                                              + P[i, 2] * g[a, 2])
-                    for cc in range(4):
-                        r[12 + cc] += w * (J - Js_t[e]) * qp[q, cc]
+                _element_residual(e, verts, coords, x, nH1, nv, zoff, c1, c2, Js_t, cb, qp, r,
+                                  g, U, Pn, F, P, H, C)
                 for i in range(3):
                     for a in range(4):
                         R[i * nH1 + verts[e, a]] += r[3 * a + i]
                     R[i * nH1 + nv + e] += r[16 + i]
                 for a in range(4):
                     R[zoff[e] + verts[e, a]] += r[12 + a]
+
+
+@numba.njit(cache=True)
+def _element_systems(elements, verts, coords, x, nH1, nv, zoff, c1, c2, Js_t, cb, qp,  # noqa: ANN001, ANN202
+                     tangent, K, r):
+    """Uncondensed residuals ``r[k]`` and, if ``tangent``, matrices ``K[k]`` of
+    ``elements[k]`` (local order of :func:`_element`; NaN for a degenerate element)."""
+    g, U = np.empty((5, 3)), np.empty((5, 3))
+    F, P, H, C = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    Pn = np.empty(4)
+    Ke = np.empty((19, 19))
+    gd = np.empty(16, dtype=np.int64)
+    for k in range(len(elements)):
+        e = elements[k]
+        _element_residual(e, verts, coords, x, nH1, nv, zoff, c1, c2, Js_t, cb, qp, r[k],
+                          g, U, Pn, F, P, H, C)
+        if tangent:
+            if not _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, Ke, gd):
+                Ke[:, :] = np.nan
+            K[k] = Ke
 
 
 @numba.njit(cache=True)
@@ -378,8 +400,9 @@ class MiniTangent:
     for that tangent.
     """
 
-    #: :meth:`element_systems` (for the residual hotspot's local problems): 2D only
-    has_element_systems = False
+    #: the local DOF (``3 a + i``, pressures ``12 + c``, bubble ``16 + i``) of each of
+    #: NGSolve's element DOFs (x: 4 vertices and the bubble, y, z, 4 pressures)
+    ngsolve_order = np.array([0, 3, 6, 9, 16, 1, 4, 7, 10, 17, 2, 5, 8, 11, 18, 12, 13, 14, 15])
 
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         t0 = time.perf_counter()
@@ -455,6 +478,25 @@ class MiniTangent:
         _residual(self.order, self.chunks, self.verts, self.coords, np.asarray(x), self.nH1,
                   self.nv, self.zoff, self.c1, self.c2, self._Js_t(), self.cb, QUAD_POINTS, R)
         return R
+
+    def element_systems(self, elements: np.ndarray, x: np.ndarray, tangent: bool
+                        ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Residuals ``(n, m)`` and, if ``tangent``, matrices ``(n, m, m)`` of ``elements``
+        at the state ``x``, uncondensed, in the order of NGSolve's element DOFs
+        (``fes.GetDofNrs``), as its integrators' ``ApplyElementMatrix`` /
+        ``CalcLinearizedElementMatrix`` give them (for the hotspot's local problems)."""
+        elements = np.asarray(elements, dtype=np.int64)
+        m = len(self.ngsolve_order)
+        r = np.empty((len(elements), m))
+        K = np.empty((len(elements) if tangent else 0, m, m))
+        self._element_systems(elements, np.asarray(x), tangent, K, r)
+        o = self.ngsolve_order
+        return r[:, o], (K[:, o][:, :, o] if tangent else None)
+
+    def _element_systems(self, elements: np.ndarray, x: np.ndarray, tangent: bool,
+                         K: np.ndarray, r: np.ndarray) -> None:
+        _element_systems(elements, self.verts, self.coords, x, self.nH1, self.nv, self.zoff,
+                         self.c1, self.c2, self._Js_t(), self.cb, QUAD_POINTS, tangent, K, r)
 
     def _Js_t(self) -> np.ndarray:
         """``Js(t) = 1 + t (Js - 1)`` per element at the form's load ``t``."""
