@@ -16,7 +16,8 @@ from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
-from brainbulge.solver.fast.mini_tangent import MiniTangent, applies, hessian
+from brainbulge.solver.fast.mini_kernels import hessian
+from brainbulge.solver.fast.mini_tangent import MiniTangent, applies
 
 SOFT = MooneyRivlin(0.03, 33.3)
 STIFF = MooneyRivlin(0.28, 333.0)

@@ -12,7 +12,7 @@ closed-form derivatives, evaluated at the plane-strain deformation gradient
     K_(ai)(bk) = sum_q w_q  dN_a/dX_j  A_ijkl  dN_b/dX_l,
     K_(ai)c = sum_q w_q  H_ij dN_a/dX_j  lambda_c
 
-with ``A = d2W/dF2`` of :func:`~brainbulge.solver.fast.mini_tangent.hessian` (indices
+with ``A = d2W/dF2`` of :func:`~brainbulge.solver.fast.mini_kernels.hessian` (indices
 ``i, j, k, l`` in the plane), ``N_a`` the three hats ``lambda_a`` and the bubble
 ``B = c_B lambda_0 lambda_1 lambda_2``, the bubble condensed statically as in 3D. The
 hemidisk's boundary triangles are curved (quadratic geometry): the physical gradients
@@ -37,6 +37,7 @@ import scipy.sparse as sp
 from brainbulge.geometry.ngsolve_arrays import element_vertices
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
 from brainbulge.solver.fast.element_graph import element_pattern
+from brainbulge.solver.fast.mini_kernels import hessian_entries, psi_derivatives
 from brainbulge.solver.fast.mini_tangent import MiniTangent
 
 #: order of NGSolve's integration rule for the 2D MINI energy (vertex P1 + cubic bubble)
@@ -52,7 +53,7 @@ _REF_GRAD = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
 def plane_strain(F, p, c1, c2, P, H, A, C, b, dI2, tangent):  # noqa: ANN001, ANN202 - kernel
     """``P = dW/dF``, ``H = cof F`` and, if ``tangent``, ``A = d2W/dF2`` (row ``2 i + j``,
     column ``2 k + l``) of the in-plane ``F`` (2x2, ``F_33 = 1``); returns ``J``. The
-    formulas of :func:`~brainbulge.solver.fast.mini_tangent.hessian` with every index in
+    formulas of :func:`~brainbulge.solver.fast.mini_kernels.hessian` with every index in
     the plane (``I1 = tr C + 1``, ``I2 = (I1^2 - |C|^2 - 1) / 2``); ``C``, ``b``, ``dI2``
     are work arrays (no allocation per integration point)."""
     H[0, 0] = F[1, 1]
@@ -66,36 +67,13 @@ def plane_strain(F, p, c1, c2, P, H, A, C, b, dI2, tangent):  # noqa: ANN001, AN
             b[i, j] = F[i, 0] * F[j, 0] + F[i, 1] * F[j, 1]
     I1 = C[0, 0] + C[1, 1] + 1.0
     I2 = 0.5 * (I1 * I1 - (C[0, 0] ** 2 + C[0, 1] ** 2 + C[1, 0] ** 2 + C[1, 1] ** 2 + 1.0))
-    a = J ** (-2.0 / 3.0)  # NaN for J <= 0, as NGSolve's
-    psi1 = 0.5 * c1 * a
-    psi2 = 0.5 * c2 * a * a
-    psiJ = -c1 / 3.0 * a / J * I1 - 2.0 * c2 / 3.0 * a * a / J * I2 + p
+    d = psi_derivatives(J, I1, I2, c1, c2, p)
     for i in range(2):
         for j in range(2):
             dI2[i, j] = 2.0 * (I1 * F[i, j] - (F[i, 0] * C[0, j] + F[i, 1] * C[1, j]))
-            P[i, j] = 2.0 * psi1 * F[i, j] + psi2 * dI2[i, j] + psiJ * H[i, j]
+            P[i, j] = 2.0 * d[0] * F[i, j] + d[1] * dI2[i, j] + d[2] * H[i, j]
     if tangent:
-        psi1J = -c1 / 3.0 * a / J
-        psi2J = -2.0 * c2 / 3.0 * a * a / J
-        psiJJ = 5.0 * c1 / 9.0 * a / (J * J) * I1 + 14.0 * c2 / 9.0 * a * a / (J * J) * I2
-        s_kron = 2.0 * psi1 + 2.0 * psi2 * I1
-        s_HH = psiJJ + psiJ / J
-        s_sw = psiJ / J
-        for i in range(2):
-            for j in range(2):
-                for k in range(2):
-                    for m in range(2):  # m is the l of the docstring
-                        e = (4.0 * psi2 * F[i, j] * F[k, m] + s_HH * H[i, j] * H[k, m]
-                             + 2.0 * psi1J * (F[i, j] * H[k, m] + H[i, j] * F[k, m])
-                             + psi2J * (dI2[i, j] * H[k, m] + H[i, j] * dI2[k, m])
-                             - 2.0 * psi2 * F[i, m] * F[k, j] - s_sw * H[i, m] * H[k, j])
-                        if i == k:
-                            e -= 2.0 * psi2 * C[m, j]
-                            if j == m:
-                                e += s_kron
-                        if j == m:
-                            e -= 2.0 * psi2 * b[i, k]
-                        A[2 * i + j, 2 * k + m] = e
+        hessian_entries(F, H, C, b, dI2, J, I1, d, A, 2)
     return J
 
 
