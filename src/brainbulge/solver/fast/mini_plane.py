@@ -27,14 +27,11 @@ searches evaluate many residuals); these loops take milliseconds.
 
 from __future__ import annotations
 
-import re
-
 import ngsolve as ngs
 import numba
 import numpy as np
 import scipy.sparse as sp
 
-from brainbulge.geometry.ngsolve_arrays import element_vertices
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
 from brainbulge.solver.fast.element_graph import element_pattern
 from brainbulge.solver.fast.mini_kernels import hessian_entries, psi_derivatives
@@ -225,23 +222,8 @@ class PlaneMiniTangent(MiniTangent):
 
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         mesh, fes = form.mesh, form.fes
-        self.form = form
-        self.verts, region = element_vertices(mesh)
+        self._element_data(form)
         nv, ne = mesh.nv, mesh.ne
-        self.nv, self.nH1, self.ndof = nv, fes.components[0].ndof // 2, fes.ndof
-        names = mesh.GetMaterials()
-        mats = form.problem.materials
-        self.c1 = np.array([mats[n].c1 for n in names])[region]
-        self.c2 = np.array([mats[n].c2 for n in names])[region]
-        self.Js = np.array([float(form.problem.swelling.get(n, 1.0)) for n in names])[region]
-        offsets = np.cumsum([0] + [s.ndof for s in fes.components])
-        zone_of_region = np.full(len(names), -1)
-        for z, pat in enumerate(form.pressure_zones):
-            rx = re.compile(f"^(?:{pat})$")
-            for r, n in enumerate(names):
-                if rx.match(n):
-                    zone_of_region[r] = z
-        self.zoff = offsets[1 + zone_of_region[region]].astype(np.int64)
         self._check_dofs(fes)
         self.G, self.Wq, self.L = _element_geometry(mesh, _bubble_constant(fes.components[0],
                                                                            mesh))

@@ -55,28 +55,10 @@ class MiniTangent:
     def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
         t0 = time.perf_counter()
         mesh, fes = form.mesh, form.fes
-        self.verts, region = element_vertices(mesh)
+        self._element_data(form)
         self.coords = vertex_coordinates(mesh)
         nv, ne = mesh.nv, mesh.ne
         V = fes.components[0]
-        self.nH1 = V.ndof // 3
-        self.nv = nv
-        self.ndof = fes.ndof
-        names = mesh.GetMaterials()
-        mats = form.problem.materials
-        self.c1 = np.array([mats[n].c1 for n in names])[region]
-        self.c2 = np.array([mats[n].c2 for n in names])[region]
-        self.form = form
-        self.Js = np.array([float(form.problem.swelling.get(n, 1.0)) for n in names])[region]
-        # each element's pressure space: the zone (regex over region names) it belongs to
-        offsets = np.cumsum([0] + [s.ndof for s in fes.components])
-        zone_of_region = np.full(len(names), -1)
-        for z, pat in enumerate(form.pressure_zones):
-            rx = re.compile(f"^(?:{pat})$")
-            for r, n in enumerate(names):
-                if rx.match(n):
-                    zone_of_region[r] = z
-        self.zoff = offsets[1 + zone_of_region[region]].astype(np.int64)
         self._check_dofs(fes)
         self.cb = _bubble_constant(V, mesh)
         colour = colour_elements(self.verts, nv)
@@ -95,6 +77,28 @@ class MiniTangent:
         numba.set_num_threads(min(available_cores(), numba.config.NUMBA_NUM_THREADS))
         log.info("closed-form MINI tangent: %d elements in %d colours, pattern %d non-zeros "
                  "(%.1f s)", ne, n_col, self._pattern.nnz, time.perf_counter() - t0)
+
+    def _element_data(self, form) -> None:  # noqa: ANN001 - MixedForm
+        """Per element: vertices, Mooney-Rivlin ``c1``, ``c2``, target ``Js`` and the offset
+        of its pressure zone's space (the zone: a regex over region names); the numbers of
+        vertices, of scalar H1 DOFs (vertices and bubbles) and of all DOFs."""
+        mesh, fes = form.mesh, form.fes
+        self.form = form
+        self.verts, region = element_vertices(mesh)
+        self.nv, self.nH1, self.ndof = mesh.nv, fes.components[0].ndof // mesh.dim, fes.ndof
+        names = mesh.GetMaterials()
+        mats = form.problem.materials
+        self.c1 = np.array([mats[n].c1 for n in names])[region]
+        self.c2 = np.array([mats[n].c2 for n in names])[region]
+        self.Js = np.array([float(form.problem.swelling.get(n, 1.0)) for n in names])[region]
+        offsets = np.cumsum([0] + [s.ndof for s in fes.components])
+        zone_of_region = np.full(len(names), -1)
+        for z, pat in enumerate(form.pressure_zones):
+            rx = re.compile(f"^(?:{pat})$")
+            for r, n in enumerate(names):
+                if rx.match(n):
+                    zone_of_region[r] = z
+        self.zoff = offsets[1 + zone_of_region[region]].astype(np.int64)
 
     def _check_dofs(self, fes: ngs.FESpace) -> None:
         """The DOF numbers assumed by the kernel against NGSolve's, for a few elements."""
