@@ -40,11 +40,11 @@ class MixedEquations:
             # (Numba, ~0.5 s: imported only where it may apply)
             from brainbulge.solver.fast import mini_plane, mini_tangent
 
-            kind = mini_tangent if form.dim == 3 else mini_plane
+            kind, closed = ((mini_tangent, mini_tangent.MiniTangent) if form.dim == 3
+                            else (mini_plane, mini_plane.PlaneMiniTangent))
             if kind.applies(form):
                 try:
-                    self.closed = (mini_tangent.MiniTangent(form) if form.dim == 3
-                                   else mini_plane.PlaneMiniTangent(form))
+                    self.closed = closed(form)
                 except ValueError as exc:  # a numbering or element it does not know
                     log.warning("closed-form tangent not used (%s); NGSolve's instead", exc)
         fes = form.fes

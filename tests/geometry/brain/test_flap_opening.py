@@ -79,3 +79,19 @@ def test_the_rounding_curves_outward_from_the_rim(sphere_envelope) -> None:
     gap = -skull.signed_distance(x, gradient=False)[0]
     assert gap == pytest.approx(np.sqrt(r**2 + s**2) - r, abs=0.05)
     assert -skull.signed_distance(np.array([[0.0, 0.0, R_MM]]))[0][0] > 20.0
+
+
+def test_every_skull_of_an_envelope_shares_its_spline_and_a_pickle_makes_it_again(
+        sphere_envelope) -> None:
+    import pickle
+
+    flap = Flap("cap", (0.0, 0.0, R_MM), (0.0, 0.0, 1.0), FLAP_RADIUS_MM)
+    intact, flapped = RigidSkull(sphere_envelope, None), RigidSkull(sphere_envelope, flap)
+    assert intact._coeffs is flapped._coeffs  # made once
+    copy = pickle.loads(pickle.dumps(sphere_envelope))
+    assert "spline_coefficients" not in copy.__dict__  # not shipped to a worker
+    x = equal_area_sphere_points(1000) * 0.9  # inside, 8 mm from the sphere
+    phi, grad = RigidSkull(copy, None).envelope_distance(x)
+    phi0, grad0 = intact.envelope_distance(x)
+    assert np.array_equal(phi, phi0) and np.array_equal(grad, grad0)
+    assert phi == pytest.approx(-0.1 * R_MM, abs=0.05)  # the distance to the sphere

@@ -17,6 +17,7 @@ from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.fast.mini_plane import PlaneMiniTangent, applies
+from closed_forms import assert_local_systems_agree, assert_same_newton_path
 
 
 def _form(contact: str = "sliding", element: str = "mini") -> MixedForm:
@@ -86,19 +87,7 @@ def test_a_folded_state_gives_a_non_finite_residual_and_tangent(form_and_state) 
 
 @pytest.mark.parametrize("contact", ["noslip", "sliding"])
 def test_newton_takes_the_same_path_as_with_ngsolves_derivatives(contact: str) -> None:
-    results = []
-    for closed in (True, False):
-        form = _form(contact)
-        ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10))
-        assert isinstance(ns.closed, PlaneMiniTangent)
-        if not closed:
-            ns.closed = None  # the plain path: NGSolve's Apply and AssembleLinearization
-        res = ns.solve()
-        assert res.converged
-        results.append((res.newton_iterations, form.gfu.vec.FV().NumPy().copy()))
-    (it1, x1), (it2, x2) = results
-    assert it1 == it2
-    assert np.abs(x1 - x2).max() <= 1e-8 * np.abs(x2).max()
+    assert_same_newton_path(lambda: _form(contact), PlaneMiniTangent)
 
 
 def test_other_forms_keep_ngsolves_derivatives() -> None:
@@ -118,11 +107,5 @@ def test_hotspot_local_problems_take_the_same_element_systems_as_ngsolves() -> N
     solver.residual(form.gfu.vec)
     relaxation = HotspotRelaxation(solver)
     local = relaxation.local_problem(relaxation.hotspot(solver.res.FV().NumPy()))
-    assert local.closed is solver.closed and len(local.elements) > 5
-    lam = local.multipliers()
-    R, K = local.assemble(X, lam, tangent=True)
-    local.closed = None  # NGSolve's integrators, element by element
-    R_ad, K_ad = local.assemble(X, lam, tangent=True)
-    assert np.abs(R_ad).max() > 0
-    assert np.abs(R - R_ad).max() <= 1e-12 * np.abs(R_ad).max()
-    assert abs(K - K_ad).max() <= 1e-12 * abs(K_ad).max()
+    assert local.closed is solver.closed
+    assert_local_systems_agree(local, X)

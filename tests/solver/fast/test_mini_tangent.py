@@ -14,10 +14,11 @@ import scipy.sparse as sp
 from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
-from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver import MixedForm, NewtonSolver
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.fast.mini_kernels import hessian
 from brainbulge.solver.fast.mini_tangent import MiniTangent, applies
+from closed_forms import assert_local_systems_agree, assert_same_newton_path
 
 SOFT = MooneyRivlin(0.03, 33.3)
 STIFF = MooneyRivlin(0.28, 333.0)
@@ -113,19 +114,7 @@ def test_a_degenerate_element_gives_a_non_finite_tangent(form_and_state) -> None
 
 
 def test_newton_takes_the_same_path_with_either_tangent() -> None:
-    results = []
-    for closed in (True, False):
-        form = MixedForm(_problem(), element="mini")
-        ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10))
-        assert ns.closed is not None
-        if not closed:
-            ns.closed = None  # the plain path: NGSolve's Apply and AssembleLinearization
-        res = ns.solve()
-        assert res.converged
-        results.append((res.newton_iterations, form.gfu.vec.FV().NumPy().copy()))
-    (it1, x1), (it2, x2) = results
-    assert it1 == it2
-    assert np.abs(x1 - x2).max() <= 1e-8 * np.abs(x2).max()
+    assert_same_newton_path(lambda: MixedForm(_problem(), element="mini"), MiniTangent)
 
 
 def test_other_forms_keep_ngsolves_tangent() -> None:
@@ -151,11 +140,5 @@ def test_hotspot_local_problems_take_the_same_element_systems_as_ngsolves(form_a
     assert solver.closed is not None
     relaxation = HotspotRelaxation(solver)
     local = relaxation.local_problem(np.array([int(mt.verts[0, 0])]))
-    assert local.closed is solver.closed and len(local.elements) > 5
-    X = form.gfu.vec.FV().NumPy()
-    R, K = local.assemble(X, local.multipliers(), tangent=True)
-    local.closed = None  # NGSolve's integrators, element by element
-    R_ad, K_ad = local.assemble(X, local.multipliers(), tangent=True)
-    assert np.abs(R_ad).max() > 0
-    assert np.abs(R - R_ad).max() <= 1e-12 * np.abs(R_ad).max()
-    assert abs(K - K_ad).max() <= 1e-12 * abs(K_ad).max()
+    assert local.closed is solver.closed
+    assert_local_systems_agree(local, form.gfu.vec.FV().NumPy())

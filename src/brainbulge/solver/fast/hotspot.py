@@ -296,17 +296,18 @@ class LocalProblem:
                 rows.append(np.broadcast_to(self.loc[:, :, None], K_e.shape)[pair])
                 cols.append(np.broadcast_to(self.loc[:, None, :], K_e.shape)[pair])
                 vals.append(K_e[pair])
-        for fe, tr, dofs, bfis, loc in self.items if self.closed is None else ():
-            xe = ngs.Vector(X[dofs])
-            on = loc >= 0
-            li = loc[on]
-            for bfi in bfis:
-                R[li] += np.asarray(bfi.ApplyElementMatrix(fe, xe, tr, HEAP))[on]
-                if tangent:
-                    Ke = np.asarray(bfi.CalcLinearizedElementMatrix(fe, xe, tr, HEAP))
-                    rows.append(np.repeat(li, len(li)))
-                    cols.append(np.tile(li, len(li)))
-                    vals.append(Ke[np.ix_(on, on)].ravel())
+        else:
+            for fe, tr, dofs, bfis, loc in self.items:
+                xe = ngs.Vector(X[dofs])
+                on = loc >= 0
+                li = loc[on]
+                for bfi in bfis:
+                    R[li] += np.asarray(bfi.ApplyElementMatrix(fe, xe, tr, HEAP))[on]
+                    if tangent:
+                        Ke = np.asarray(bfi.CalcLinearizedElementMatrix(fe, xe, tr, HEAP))
+                        rows.append(np.repeat(li, len(li)))
+                        cols.append(np.tile(li, len(li)))
+                        vals.append(Ke[np.ix_(on, on)].ravel())
         blocks = []
         k = n
         for pc, pts, P, P_loc in self.contacts:

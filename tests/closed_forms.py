@@ -1,0 +1,42 @@
+"""Shared checks of the closed-form residual and tangent (:mod:`brainbulge.solver.fast`)
+against the plain path through NGSolve's automatic differentiation."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+
+def assert_same_newton_path(make_form: Callable[[], MixedForm], closed_type: type) -> None:
+    """Newton on ``make_form()`` with the closed form (of ``closed_type``) and without it
+    (NGSolve's ``Apply`` and ``AssembleLinearization``): the same iterations, states equal
+    to 1e-8."""
+    results = []
+    for closed in (True, False):
+        form = make_form()
+        ns = NewtonSolver(form, SolverOptions(steps=2, tolerance=1e-10))
+        assert isinstance(ns.closed, closed_type)
+        if not closed:
+            ns.closed = None
+        res = ns.solve()
+        assert res.converged
+        results.append((res.newton_iterations, form.gfu.vec.FV().NumPy().copy()))
+    (it1, x1), (it2, x2) = results
+    assert it1 == it2
+    assert np.abs(x1 - x2).max() <= 1e-8 * np.abs(x2).max()
+
+
+def assert_local_systems_agree(local, X: np.ndarray) -> None:  # noqa: ANN001 - LocalProblem
+    """A hotspot's local residual and tangent at ``X`` from the closed form's element
+    systems equal those from NGSolve's integrators, element by element, to 1e-12."""
+    assert local.closed is not None and len(local.elements) > 5
+    lam = local.multipliers()
+    R, K = local.assemble(X, lam, tangent=True)
+    local.closed = None  # NGSolve's integrators, element by element
+    R_ad, K_ad = local.assemble(X, lam, tangent=True)
+    assert np.abs(R_ad).max() > 0
+    assert np.abs(R - R_ad).max() <= 1e-12 * np.abs(R_ad).max()
+    assert abs(K - K_ad).max() <= 1e-12 * abs(K_ad).max()
