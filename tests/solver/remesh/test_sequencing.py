@@ -4,7 +4,7 @@ spherical skull with polar openings, meshed twice (h = 0.3 and 0.15).
 
 - the carried-over state is exact where it can be: affine ``u`` and per-zone affine ``p`` at
   fine vertices inside the coarse mesh (inside the same zone, for ``p``); contact pressures
-  from the nearest point; pressed points end on the obstacle;
+  from the nearest point; pressed points end on the obstacle, unless that folds an element;
 - Newton from the carried-over coarse solution reaches the fine ramp's state, in fewer fine
   iterations; when it fails, the fine mesh ramps from Js = 1 and reaches it all the same.
 """
@@ -17,12 +17,19 @@ import pytest
 from scipy.spatial import cKDTree
 
 from brainbulge.errors import InputError
+from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates, vertex_dofs
 from brainbulge.solver import SolverOptions
 from brainbulge.solver import ramp as solver_ramp
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.options import Solution
-from brainbulge.solver.remesh.sequencing import interpolate_state, solve_sequenced
+from brainbulge.solver.remesh.sequencing import (
+    FOLD_RATIO,
+    interpolate_state,
+    measure_ratio,
+    press_onto_obstacles,
+    solve_sequenced,
+)
 from contact_cases import _coords, _forms
 
 OPTIONS = SolverOptions(steps=2)
@@ -215,3 +222,48 @@ def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     assert hist_f[-1][-1] <= OPTIONS.tolerance
 
 
+
+
+class _KinkedSkull:
+    """The unit sphere as skull (``g = 1 - |x|``), every point 0.01 inside it, except that
+    the point at ``spot`` is 0.5 inside with a tangential normal: projecting it onto the
+    skull moves it by 0.5 along the surface, across its neighbours (elements of h = 0.15)."""
+
+    def __init__(self, spot: np.ndarray, tangent: np.ndarray) -> None:
+        self.spot, self.tangent = spot, tangent
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = np.linalg.norm(x, axis=1)
+        g, n = 0.99 - r, -x / r[:, None]
+        at = np.linalg.norm(x - self.spot, axis=1) < 1e-9
+        g[at], n[at] = -0.5, self.tangent
+        return g, n
+
+
+def test_moves_onto_the_obstacle_that_fold_elements_are_undone() -> None:
+    _, fine = _forms()
+    mesh = fine.mesh
+    X = vertex_coordinates(mesh)
+    els, _ = element_vertices(mesh)
+    pc = fine.point_contacts[0]
+    vd = vertex_dofs(fine.fes.components[0], mesh)
+    i = int(np.argmin(np.abs(X[pc.vertices, 2] - 0.5 * X[pc.vertices].max(axis=0)[2])))
+    spot = X[pc.vertices[i]]
+    radial = spot / np.linalg.norm(spot)
+    tangent = np.cross(radial, [0.0, 0.0, 1.0])
+    pc.obstacle = _KinkedSkull(spot, tangent / np.linalg.norm(tangent))
+    pc.lam = np.ones(pc.n_points)
+    x = fine.gfu.vec.FV().NumPy()
+    x[:] = 0.0
+    moved_alone = x.copy()
+    pc.update(moved_alone)
+    pc.move_onto_obstacle(moved_alone, pc.lam > 0)
+    assert measure_ratio(X, els, moved_alone[vd]).min() < 0  # the kinked move folds
+    press_onto_obstacles(fine, X, els)
+    J = measure_ratio(X, els, x[vd])
+    assert J.min() >= FOLD_RATIO
+    assert np.all(x[vd[pc.vertices[i]]] == 0.0)  # the folding move undone
+    r = np.linalg.norm(X[pc.vertices] + x[vd[pc.vertices]], axis=1)
+    kept = np.abs(r - np.linalg.norm(X[pc.vertices], axis=1)) > 0
+    assert kept.mean() > 0.9  # the others pressed onto the skull
+    assert np.allclose(r[kept], 0.99, atol=1e-3)
