@@ -4,8 +4,8 @@ spherical skull with polar openings, meshed twice (h = 0.3 and 0.15).
 
 - the carried-over state is exact where it can be: affine ``u`` and per-zone affine ``p`` at
   fine vertices inside the coarse mesh (inside the same zone, for ``p``; elsewhere the zone's
-  pressure starts at 0); contact pressures
-  from the nearest point; pressed points end on the obstacle, unless that folds an element;
+  pressure starts at 0); contact pressures from the nearest point; pressed points end on the
+  obstacle, unless that folds an element;
 - Newton from the carried-over coarse solution reaches the fine ramp's state, in fewer fine
   iterations; when it fails, the fine mesh ramps from Js = 1 and reaches it all the same.
 """
@@ -221,8 +221,6 @@ def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     assert tol_c == sequencing.COARSE_TOLERANCE > tol_f == OPTIONS.tolerance
     assert sequencing.COARSE_TOLERANCE * 1e-3 < hist_c[-1][-1] <= sequencing.COARSE_TOLERANCE
     assert hist_f[-1][-1] <= OPTIONS.tolerance
-
-
 
 
 class _KinkedSkull:
