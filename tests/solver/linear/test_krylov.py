@@ -114,6 +114,31 @@ def test_taylor_hood_two_level_cycle_is_symmetric(swollen_taylor_hood) -> None:
     assert np.linalg.norm(za - cycle(a)) == 0  # no state kept between applications
 
 
+def test_displacement_cycle_is_symmetric_after_setup_and_update(swollen) -> None:
+    """Symmetric Gauss-Seidel sweeps on both sides of an exact coarse solve: ``z(a) . b =
+    a . z(b)``, also once ``update`` has put a new matrix on the finest level (pyamg's own
+    ``change_solve_matrix`` would bring back a one-sided forward sweep there)."""
+    form, ns, K, _ = swollen
+    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
+    A = K[solver.iu][:, solver.iu].tocsr()
+    assert abs(A - A.T).max() <= 1e-12 * abs(A).max()
+    cycle = solver.amg_u
+    cycle.setup(A)
+    assert len(cycle.ml.levels) > 1
+    a, b = np.random.default_rng(2).standard_normal((2, A.shape[0]))
+    for M in (A, (A + 0.1 * sp.diags(A.diagonal())).tocsr()):
+        cycle.update(M)
+        za, zb = cycle(a), cycle(b)
+        assert abs(za @ b - a @ zb) <= 1e-10 * np.linalg.norm(za) * np.linalg.norm(b)
+    # a one-sided smoother (forward on both sides) is not symmetric: the check can fail
+    forward = ("gauss_seidel", {"sweep": "forward"})
+    cycle.options = {**cycle.options, "presmoother": forward, "postsmoother": forward}
+    cycle.setup(A)
+    assert len(cycle.ml.levels) > 1
+    za, zb = cycle(a), cycle(b)
+    assert abs(za @ b - a @ zb) > 1e-6 * np.linalg.norm(za) * np.linalg.norm(b)
+
+
 def test_matches_direct_solve(swollen) -> None:
     form, ns, K, r = swollen
     solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
