@@ -42,6 +42,16 @@ def box3d() -> ngs.Mesh:
     return unit_box_mesh(3)
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the group marks
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Under pytest-xdist's ``--dist loadgroup`` (pyproject.toml) a test module runs on one
+    worker, so its module-scoped fixtures are built once, and the modules that read the quick
+    demo share one worker, so its ~60 s run happens once."""
+    for item in items:
+        group = "quick_demo" if "quick_demo" in item.fixturenames else item.path.stem
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
 @pytest.fixture(scope="session")
 def quick_demo(tmp_path_factory):
     """The main job, ``brainbulge demo --quick``, run once: (exit code, output folder).
