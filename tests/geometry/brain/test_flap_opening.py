@@ -95,3 +95,25 @@ def test_every_skull_of_an_envelope_shares_its_spline_and_a_pickle_makes_it_agai
     phi0, grad0 = intact.envelope_distance(x)
     assert np.array_equal(phi, phi0) and np.array_equal(grad, grad0)
     assert phi == pytest.approx(-0.1 * R_MM, abs=0.05)  # the distance to the sphere
+
+
+def test_the_cut_ends_halfway_between_the_opening_and_other_skull_in_its_cylinder() -> None:
+    """A skull that curves back into the cutting cylinder within its depth (the middle
+    cranial fossa under a fronto-temporo-parietal flap) is not cut: the cut ends halfway
+    between the opening's deepest node (30 mm) and that skull's shallowest (50 mm)."""
+    from brainbulge.geometry.brain.boundaries import clear_of_other_skull
+
+    flap = Flap("side", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), FLAP_RADIUS_MM)  # cut 60 mm deep
+    angle = np.linspace(0, 2 * math.pi, 12, endpoint=False)
+    ring = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    opening = np.vstack([ring * r + np.array([0, 0, -d])
+                         for d, r in ((0.0, 5.0), (15.0, 40.0), (30.0, 59.0))])
+    fossa = ring * 58.0 + np.array([0.0, 0.0, -50.0])
+    assert flap.contains(fossa).all()  # the cylinder 60 mm deep opens it
+    cleared = clear_of_other_skull(flap, opening, fossa)
+    assert cleared.depth_mm == pytest.approx(40.0)
+    assert not cleared.contains(fossa).any()
+    assert cleared.contains(opening).all()
+    # other skull beyond the depth or outside the cylinder: the flap stays as it is
+    for other in (ring * 58.0 + np.array([0, 0, -70.0]), ring * 61.0 + np.array([0, 0, -50.0])):
+        assert clear_of_other_skull(flap, opening, other) is flap
