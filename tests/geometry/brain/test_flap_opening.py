@@ -117,3 +117,33 @@ def test_the_cut_ends_halfway_between_the_opening_and_other_skull_in_its_cylinde
     # other skull beyond the depth or outside the cylinder: the flap stays as it is
     for other in (ring * 58.0 + np.array([0, 0, -70.0]), ring * 61.0 + np.array([0, 0, -50.0])):
         assert clear_of_other_skull(flap, opening, other) is flap
+
+
+def test_the_cutters_smooth_inside_distance_has_no_crease_at_its_edges() -> None:
+    """Inside the cutter, near the edge where its wall meets its floor, ``max`` of the two
+    distances turns its gradient by 90 degrees across the bisector (where the skull's normal
+    creased and Newton stagnated at a pressed contact point); the smooth inside distance
+    keeps the zero level and the faces' gradients and matches its finite differences."""
+    flap = Flap("low", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), FLAP_RADIUS_MM, floor_z_mm=-500.0,
+                depth_mm=40.0)
+    # on the bisector of the wall (radius 60) and the floor (40 mm deep), 2.4 mm inside both
+    on = np.array([[FLAP_RADIUS_MM - 2.4, 0.0, -40.0 + 2.4]])
+    h = 1e-4
+    across = np.array([[h, 0.0, h]])  # across the bisector
+    crease = flap.cutter_distance(on + across)[1] - flap.cutter_distance(on - across)[1]
+    assert np.linalg.norm(crease) > 1.0  # max(w): the gradient jumps
+    phi, grad = flap.cutter_distance(on, smooth_inside=True)
+    jump = (flap.cutter_distance(on + across, smooth_inside=True)[1]
+            - flap.cutter_distance(on - across, smooth_inside=True)[1])
+    assert np.linalg.norm(jump) < 1e-3
+    fd = np.array([(flap.cutter_distance(on + h * e, smooth_inside=True)[0]
+                    - flap.cutter_distance(on - h * e, smooth_inside=True)[0])[0] / (2 * h)
+                   for e in np.eye(3)])
+    np.testing.assert_allclose(grad[0], fd, atol=1e-6)
+    assert phi[0] == pytest.approx(-2.4 * 2 ** -0.25, rel=1e-9)
+    # the same level zero and the same distance near one face
+    x = np.array([[30.0, 0.0, -10.0], [59.0, 0.0, -10.0], [61.0, 0.0, -10.0], [0, 0, -39.0]])
+    plain, smooth = flap.cutter_distance(x), flap.cutter_distance(x, smooth_inside=True)
+    np.testing.assert_array_equal(plain[0] < 0, smooth[0] < 0)
+    np.testing.assert_allclose(smooth[0][1:], plain[0][1:], rtol=1e-3)
+    np.testing.assert_allclose(smooth[1][1:], plain[1][1:], atol=1e-3)

@@ -43,6 +43,10 @@ FRONTAL_DEPTH_MM = 120.0
 FRONTAL_FLOOR_FRACTION = 0.35
 
 
+#: ``k`` of the cutter's smooth inside distance (:meth:`Flap.cutter_distance`).
+INSIDE_EXPONENT = 4
+
+
 @dataclass(frozen=True)
 class SuperiorBand:
     """The outer surface within ``width_mm / 2`` of the mid-sagittal plane and at least
@@ -103,8 +107,18 @@ class Flap:
     floor_z_mm: float | None = None
     meta: dict = field(default_factory=dict, compare=False)
 
-    def cutter_distance(self, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distance (mm, negative inside) to the cutting cylinder, and its gradient."""
+    def cutter_distance(self, points_mm: np.ndarray, smooth_inside: bool = False
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance (mm, negative inside) to the cutting cylinder, and its gradient.
+
+        The cutter is the intersection of the infinite cylinder (``w_1 = dist - R < 0``), the
+        half-space ``w_2 = -(axial + depth) < 0`` and, with a floor, ``w_3 = floor_z - z <
+        0``: outside, ``|max(w, 0)|`` (exact outside a corner); inside, ``max(w)``, whose
+        gradient jumps on the bisector of every edge of the cutter. With ``smooth_inside``
+        the inside value is ``-(sum_i (-w_i)^-k)^(-1/k)`` (``k`` = :data:`INSIDE_EXPONENT`):
+        the same zero level and gradient on the faces, smooth inside (within ``2^(-1/k)``
+        of ``max(w)`` on a bisector, within 0.3 % where the next face is 3x as far), as the
+        rigid skull's normal at a rounded cut edge needs (a crease there stalls Newton)."""
         a = np.asarray(self.axis, float)
         e = np.asarray(self.long_axis, float)
         e = e - (e @ a) * a
@@ -135,6 +149,12 @@ class Flap:
         # normal jumped there)
         weight = np.where(inside[:, None], nearest,
                           wpos / np.where(inside, 1.0, outside)[:, None])
+        if smooth_inside:
+            deep = inside & (w.max(axis=1) < -1e-9)  # (on a face: max(w) = 0 as it is)
+            depth_k = (-w[deep]) ** -float(INSIDE_EXPONENT)
+            phi[deep] = -depth_k.sum(axis=1) ** (-1 / INSIDE_EXPONENT)
+            # d phi / d w_i = (phi / w_i)^(k + 1)
+            weight[deep] = (phi[deep, None] / w[deep]) ** (INSIDE_EXPONENT + 1)
         grad = np.einsum("nk,knd->nd", weight, np.stack(grads))
         return phi, grad
 
