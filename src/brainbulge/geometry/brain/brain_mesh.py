@@ -215,8 +215,8 @@ def build_brain_mesh(
     geometry a Taylor-Hood solution on the Netgen mesh sees, for comparisons of elements and
     mesh sizes on one geometry. ``fit_tissue_interfaces``: move the tissue interfaces' nodes
     onto smoothed label surfaces (:mod:`interfaces`) instead of the voxel staircase of the
-    tags; off by default: on the 21k-tet template one of the demo's two quick scenarios (left
-    flap, left swelling) was still at load 0.95 after 5 min with it, 23 s without.
+    tags; off by default: on the 21k-tet template its scenarios take as many Newton iterations
+    but about twice the direct-solve time (PARDISO's symmetric mode fails on its tangents).
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
