@@ -102,3 +102,19 @@ def test_paper_sized_mesh_quality_and_volumes() -> None:
     vols = mesh.tissue_volumes_ml()
     for name in TISSUES.values():
         assert vols[name] == pytest.approx(mesh.voxel_volumes_ml[name], rel=0.02), name
+
+
+@pytest.mark.slow
+def test_fitted_interfaces_solve_the_left_flap_left_swelling_scenario(tmp_path) -> None:
+    """The template with fitted tissue interfaces solves the left flap / left swelling
+    scenario without a rejected load step (with the left cutter 60 mm deep, a pressed
+    contact point on its inner corner in the middle cranial fossa stalled Newton beyond
+    load 0.95)."""
+    from brainbulge.studies.craniectomy import run_brain
+
+    mesh = build_brain_mesh(target_tets=30_000, fit_tissue_interfaces=True)
+    summary = run_brain({"flap": "left", "swell": "left", "steps": 2}, tmp_path,
+                        brain_mesh=mesh)
+    assert summary["converged"]
+    assert summary["rejected_steps"] == 0
+    assert summary["newton_iterations"] <= 8
