@@ -216,7 +216,7 @@ def build_brain_mesh(
     mesh sizes on one geometry. ``fit_tissue_interfaces``: move the tissue interfaces' nodes
     onto smoothed label surfaces (:mod:`interfaces`) instead of the voxel staircase of the
     tags; off by default: on the 21k-tet template its scenarios take as many Newton iterations
-    but about twice the direct-solve time (PARDISO's symmetric mode fails on its tangents).
+    but 1.6-4.3x the direct-solve time (PARDISO's symmetric mode fails on its tangents).
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
