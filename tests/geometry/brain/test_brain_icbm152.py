@@ -79,6 +79,18 @@ def test_skull_obstacle_is_open_over_the_flap(icbm_mesh) -> None:
     assert intact.signed_distance(out[None])[0][0] == pytest.approx(10.0, abs=0.5)
 
 
+@pytest.mark.parametrize("name", ["left", "right", "frontal"])
+def test_the_skull_opens_over_the_flap_only(icbm_mesh, name) -> None:
+    """The obstacle is relieved (skull with the flap farther than the intact skull) only
+    over the flap's faces: with each unilateral cutter 60 mm deep, 2 cm^2 of the middle
+    cranial fossa opened too, and the cutter's inner corner creased the skull's normal
+    there (Newton stagnated at a contact point on it)."""
+    m = icbm_mesh
+    assert m.free_area_cm2(name) == pytest.approx(m.flap_area_cm2(name), abs=0.01)
+    others = np.setdiff1d(np.unique(m.faces), np.unique(m.faces[m.flap_faces[name]]))
+    assert not m.flaps[name].contains(m.nodes_mm[others]).any()
+
+
 @pytest.mark.slow
 def test_paper_sized_mesh_quality_and_volumes() -> None:
     """Paper-sized mesh (the paper: 1.28M tets for 1108 ml): here ~400k tets of the template."""
@@ -90,3 +102,19 @@ def test_paper_sized_mesh_quality_and_volumes() -> None:
     vols = mesh.tissue_volumes_ml()
     for name in TISSUES.values():
         assert vols[name] == pytest.approx(mesh.voxel_volumes_ml[name], rel=0.02), name
+
+
+@pytest.mark.slow
+def test_fitted_interfaces_solve_the_left_flap_left_swelling_scenario(tmp_path) -> None:
+    """The template with fitted tissue interfaces solves the left flap / left swelling
+    scenario without a rejected load step (with the left cutter 60 mm deep, a pressed
+    contact point on its inner corner in the middle cranial fossa stalled Newton beyond
+    load 0.95)."""
+    from brainbulge.studies.craniectomy import run_brain
+
+    mesh = build_brain_mesh(target_tets=30_000, fit_tissue_interfaces=True)
+    summary = run_brain({"flap": "left", "swell": "left", "steps": 2}, tmp_path,
+                        brain_mesh=mesh)
+    assert summary["converged"]
+    assert summary["rejected_steps"] == 0
+    assert summary["newton_iterations"] <= 8

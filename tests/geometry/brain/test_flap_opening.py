@@ -95,3 +95,55 @@ def test_every_skull_of_an_envelope_shares_its_spline_and_a_pickle_makes_it_agai
     phi0, grad0 = intact.envelope_distance(x)
     assert np.array_equal(phi, phi0) and np.array_equal(grad, grad0)
     assert phi == pytest.approx(-0.1 * R_MM, abs=0.05)  # the distance to the sphere
+
+
+def test_the_cut_ends_halfway_between_the_opening_and_other_skull_in_its_cylinder() -> None:
+    """A skull that curves back into the cutting cylinder within its depth (the middle
+    cranial fossa under a fronto-temporo-parietal flap) is not cut: the cut ends halfway
+    between the opening's deepest node (30 mm) and that skull's shallowest (50 mm)."""
+    from brainbulge.geometry.brain.boundaries import clear_of_other_skull
+
+    flap = Flap("side", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), FLAP_RADIUS_MM)  # cut 60 mm deep
+    angle = np.linspace(0, 2 * math.pi, 12, endpoint=False)
+    ring = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    opening = np.vstack([ring * r + np.array([0, 0, -d])
+                         for d, r in ((0.0, 5.0), (15.0, 40.0), (30.0, 59.0))])
+    fossa = ring * 58.0 + np.array([0.0, 0.0, -50.0])
+    assert flap.contains(fossa).all()  # the cylinder 60 mm deep opens it
+    cleared = clear_of_other_skull(flap, opening, fossa)
+    assert cleared.depth_mm == pytest.approx(40.0)
+    assert not cleared.contains(fossa).any()
+    assert cleared.contains(opening).all()
+    # other skull beyond the depth or outside the cylinder: the flap stays as it is
+    for other in (ring * 58.0 + np.array([0, 0, -70.0]), ring * 61.0 + np.array([0, 0, -50.0])):
+        assert clear_of_other_skull(flap, opening, other) is flap
+
+
+def test_the_cutters_smooth_inside_distance_has_no_crease_at_its_edges() -> None:
+    """Inside the cutter, near the edge where its wall meets its floor, ``max`` of the two
+    distances turns its gradient by 90 degrees across the bisector (where the skull's normal
+    creased and Newton stagnated at a pressed contact point); the smooth inside distance
+    keeps the zero level and the faces' gradients and matches its finite differences."""
+    flap = Flap("low", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), FLAP_RADIUS_MM, floor_z_mm=-500.0,
+                depth_mm=40.0)
+    # on the bisector of the wall (radius 60) and the floor (40 mm deep), 2.4 mm inside both
+    on = np.array([[FLAP_RADIUS_MM - 2.4, 0.0, -40.0 + 2.4]])
+    h = 1e-4
+    across = np.array([[h, 0.0, h]])  # across the bisector
+    crease = flap.cutter_distance(on + across)[1] - flap.cutter_distance(on - across)[1]
+    assert np.linalg.norm(crease) > 1.0  # max(w): the gradient jumps
+    phi, grad = flap.cutter_distance(on, smooth_inside=True)
+    jump = (flap.cutter_distance(on + across, smooth_inside=True)[1]
+            - flap.cutter_distance(on - across, smooth_inside=True)[1])
+    assert np.linalg.norm(jump) < 1e-3
+    fd = np.array([(flap.cutter_distance(on + h * e, smooth_inside=True)[0]
+                    - flap.cutter_distance(on - h * e, smooth_inside=True)[0])[0] / (2 * h)
+                   for e in np.eye(3)])
+    np.testing.assert_allclose(grad[0], fd, atol=1e-6)
+    assert phi[0] == pytest.approx(-2.4 * 2 ** -0.25, rel=1e-9)
+    # the same level zero and the same distance near one face
+    x = np.array([[30.0, 0.0, -10.0], [59.0, 0.0, -10.0], [61.0, 0.0, -10.0], [0, 0, -39.0]])
+    plain, smooth = flap.cutter_distance(x), flap.cutter_distance(x, smooth_inside=True)
+    np.testing.assert_array_equal(plain[0] < 0, smooth[0] < 0)
+    np.testing.assert_allclose(smooth[0][1:], plain[0][1:], rtol=1e-3)
+    np.testing.assert_allclose(smooth[1][1:], plain[1][1:], atol=1e-3)

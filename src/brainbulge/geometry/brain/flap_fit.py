@@ -181,7 +181,7 @@ def fit_flap(bm: BrainMesh, centre_mm, diameter_mm: float, band: SuperiorBand | 
         probe.add_flap(flap)
     except InputError:
         return refused("covers no face of the skull surface")
-    mask = probe.flap_faces[name]
+    flap, mask = probe.flaps[name], probe.flap_faces[name]  # (the cut's depth as added)
     in_band = bm.superior_faces(band) if band is not None else empty
     clipped = mask & in_band
     mask = mask & ~in_band

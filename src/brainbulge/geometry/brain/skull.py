@@ -11,7 +11,9 @@ inner surface and outside the cutter,
     u = (d_skull + r, -d_cut),   d_core = |max(u, 0)| + min(max(u), 0),   d = d_core - r,
     phi = -d
 
-with ``d_skull = -phi_env`` and ``d_cut`` the cutter's distance (negative inside). Outside
+with ``d_skull = -phi_env`` and ``d_cut`` the cutter's distance (negative inside; smooth
+inside, ``Flap.cutter_distance(smooth_inside=True)``: its max of the distances to the
+cutter's faces creased the skull's normal over the bisectors of the cutter's edges). Outside
 the cutter ``d = d_skull`` exactly: the skull's inner surface ends at the nominal rim, where a
 torus of radius ``r`` takes over, tangent to it, and curves outward (gap ``sqrt(r^2 +
 d_cut^2) - r ~ d_cut^2 / (2 r)`` on the inner surface inside the rim); deep in the bone the
@@ -85,7 +87,7 @@ class RigidSkull:
         if self.flap is None:
             return phi_env, g_env
         r = self.edge_radius_mm
-        d_cut, g_cut = self.flap.cutter_distance(pts)
+        d_cut, g_cut = self.flap.cutter_distance(pts, smooth_inside=True)
         # standard distances (negative inside) of the core: the bone r beyond the inner
         # surface, and the cutter's outside
         u = np.stack([-phi_env + r, -d_cut], axis=1)
