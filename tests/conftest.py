@@ -2,7 +2,18 @@
 
 from __future__ import annotations
 
+import os
+
 from brainbulge.runtime import configure
+from brainbulge.studies.runner import THREAD_VARIABLES
+
+#: pytest-xdist runs one worker per core (pyproject.toml); each then computes on one thread,
+#: as do the processes it starts: threads of several workers competing for the same cores
+#: spin-wait and made the suite slower than one process on all cores
+ONE_THREAD_PER_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1
+if ONE_THREAD_PER_WORKER:
+    for key in THREAD_VARIABLES:
+        os.environ.setdefault(key, "1")
 
 configure()  # the tuning of a brainbulge run (threads, MKL, heap, compiler cache), before NGSolve
 
