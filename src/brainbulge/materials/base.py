@@ -29,6 +29,10 @@ class Material(Protocol):
         """Small-strain shear modulus ``mu`` [kPa]."""
         ...
 
+    def scaled(self, factor: float) -> Material:
+        """The same solid ``factor`` times as stiff (every modulus scaled) [-]."""
+        ...
+
     def psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         """Isochoric strain energy density ``psibar(F)`` [kPa] of a 3x3 ``F``."""
         ...

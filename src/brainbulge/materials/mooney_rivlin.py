@@ -15,6 +15,7 @@ Kirchhoff stress is, in closed form::
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import ngsolve as ngs
@@ -45,6 +46,10 @@ class MooneyRivlin:
     def shear_modulus(self) -> float:
         """``mu = c1 + c2`` [kPa]."""
         return self.c1 + self.c2
+
+    def scaled(self, factor: float) -> MooneyRivlin:
+        """The same solid ``factor`` times as stiff (``c1``, ``c2`` scaled)."""
+        return dataclasses.replace(self, c1=factor * self.c1, c2=factor * self.c2)
 
     def psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         return mooney_rivlin_psi(F, self.c1, self.c2)

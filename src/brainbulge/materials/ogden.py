@@ -17,6 +17,7 @@ NGSolve's symbolic forms, hence this hand-written piece.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -51,6 +52,10 @@ class Ogden:
     @property
     def shear_modulus(self) -> float:
         return 0.5 * sum(ci * ai for ci, ai in zip(self.c, self.alpha, strict=True))
+
+    def scaled(self, factor: float) -> Ogden:
+        """The same solid ``factor`` times as stiff (every ``c_i`` scaled)."""
+        return dataclasses.replace(self, c=tuple(factor * ci for ci in self.c))
 
     def psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         J = ngs.Det(F)

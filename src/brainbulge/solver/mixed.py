@@ -45,6 +45,7 @@ class MixedForm:
             raise InputError(f"unknown element {element!r}; choose one of {', '.join(ELEMENTS)}")
         self.problem = problem
         self.element = element
+        self.compile_energy = compile_energy
         mesh = problem.mesh
         self.mesh = mesh
         dim = mesh.dim

@@ -204,6 +204,7 @@ def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp,
 def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
     """The coarse state is only a start: its Newton stops at COARSE_TOLERANCE, the fine
     mesh's at the requested tolerance."""
+    from brainbulge.solver import contrast
     from brainbulge.solver.remesh import sequencing
 
     histories = []
@@ -214,6 +215,7 @@ def test_the_coarse_stage_stops_at_its_own_tolerance(monkeypatch) -> None:
             histories.append((options.tolerance, self.history))
 
     monkeypatch.setattr(sequencing, "NewtonSolver", Recording)
+    monkeypatch.setattr(contrast, "NewtonSolver", Recording)  # the fine stage's
     coarse, fine = _forms()
     sol, _ = solve_sequenced(coarse, fine, OPTIONS)
     assert sol.converged

@@ -1,0 +1,135 @@
+"""Continuation in the stiffness contrast between regions: Newton at full load from a
+carried-over state, through stiffer soft regions first.
+
+Newton's tangent on a fine brain mesh loses definiteness where the ultrasoft CSF (``mu`` 33 kPa
+against 333-666 kPa in the parenchyma, MODEL.md) is pressed onto the skull's rounded cut edge:
+the contacts' curvature term ``A_i lambda_i / r`` outweighs the CSF's stiffness, and from a
+state carried over from a coarse mesh Newton stagnates at the flap's rim (docs/known-limits.md).
+With the CSF as stiff as gray matter the same fine stage converges in a few iterations. So
+the fine stage walks a path in the materials' parameters instead, as the load ramp walks one in
+``Js``: each region's shear modulus is raised to at least ``mu_max / kappa``,
+
+    mu_r(kappa) = max(mu_r, mu_max / kappa)       (c1, c2 or c_i scaled alike: c1/c2 kept),
+
+starting from ``kappa_0 = CONTRAST_START`` (the parenchyma's own contrast, white over gray)
+and multiplying ``kappa`` by ``CONTRAST_STEP`` up to the model's contrast
+``kappa_model = mu_max / mu_min``; every step is Newton at full load from the last
+equilibrium, and a step that fails is halved (in ``log kappa``) up to ``MAX_HALVINGS`` times.
+The last step is the model itself: the state reached is its equilibrium to the solver's
+tolerance, the intermediate materials are only the way there. A problem whose contrast is
+at most ``CONTRAST_START`` takes one step, the plain Newton solve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable
+
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver.options import Solution, SolverOptions
+
+log = logging.getLogger("brainbulge")
+
+#: the contrast the path starts from: white over gray matter (666 / 333 kPa), the parenchyma's
+#: own, where the 100k-tet template's fine stage converges from the 25k-tet state (4 Newton
+#: iterations with a 2 or 8 mm edge)
+CONTRAST_START = 2.0
+#: growth of the contrast per step (2 -> 6.3 -> 20 for the brain's CSF)
+CONTRAST_STEP = math.sqrt(10.0)
+#: a failed step is halved (in log kappa) at most this often before the path gives up
+MAX_HALVINGS = 3
+
+
+def contrast(materials: dict) -> float:
+    """``mu_max / mu_min`` over the regions' materials."""
+    mu = [m.shear_modulus for m in materials.values()]
+    return max(mu) / min(mu)
+
+
+def capped_materials(materials: dict, kappa: float) -> dict:
+    """The materials with every shear modulus raised to at least ``mu_max / kappa`` (each
+    material scaled as a whole, :meth:`scaled`); unchanged where it already is."""
+    mu_max = max(m.shear_modulus for m in materials.values())
+    floor = mu_max / kappa
+    return {r: m if m.shear_modulus >= floor else m.scaled(floor / m.shear_modulus)
+            for r, m in materials.items()}
+
+
+def contrast_path(materials: dict) -> list[float]:
+    """The contrasts of the path's steps: ``CONTRAST_START`` times powers of
+    ``CONTRAST_STEP``, ending at the model's (one step when that is not larger)."""
+    target = contrast(materials)
+    path = [min(CONTRAST_START, target)]
+    while path[-1] < target * (1 - 1e-12):
+        path.append(min(path[-1] * CONTRAST_STEP, target))
+    return path
+
+
+def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
+                                 start: Callable[[MixedForm], None]
+                                 ) -> tuple[Solution, float | None]:
+    """Newton at ``form``'s load through the contrast path (module docstring); ``start(f)``
+    puts the start state into a form ``f`` on ``form``'s mesh (e.g. carries a coarse state
+    over). Returns the scaled residual of the start state (on the first step's form) and the
+    solution on ``form``, its Newton iterations, Krylov iterations and
+    times those of the whole path (one :class:`StepRecord` per step taken); ``converged``
+    false if the path gave up (``form``'s state is then not an equilibrium). The linear solvers'
+    memory is released."""
+    t0 = time.perf_counter()
+    problem = form.problem
+    path = contrast_path(problem.materials)
+    target = path[-1]
+    kappa, reached, halvings = path[0], None, 0
+    previous: MixedForm | None = None
+    records, linear, assembly, solve_time = [], 0, 0.0, 0.0
+    first: float | None = None
+    while True:
+        step_form = form if kappa >= target else MixedForm(
+            dataclasses.replace(problem, materials=capped_materials(problem.materials, kappa)),
+            element=form.element, compile_energy=form.compile_energy)
+        if previous is None:
+            start(step_form)
+        else:
+            _copy_state(previous, step_form)
+        solver = NewtonSolver(step_form, options)
+        sol = solver.equilibrate()
+        solver.release_linear_solver()
+        if first is None and solver.history:
+            first = solver.history[0][0]
+        records += sol.steps
+        linear += sol.linear_iterations
+        assembly += sol.assembly_time_s
+        solve_time += sol.solve_time_s
+        if len(path) > 1:
+            log.info("  contrast %.3g of %.3g: %s in %d Newton iterations", kappa, target,
+                     "converged" if sol.converged else "not converged",
+                     sol.newton_iterations)
+        if sol.converged and step_form is form:
+            break
+        if sol.converged:
+            previous, reached, halvings = step_form, kappa, 0
+            kappa = min(kappa * CONTRAST_STEP, target)
+        elif previous is None or halvings >= MAX_HALVINGS:
+            sol.note += f" (contrast path stopped at {kappa:.3g} of {target:.3g})"
+            break
+        else:  # halve the step in log kappa, from the last equilibrium
+            halvings += 1
+            kappa = math.sqrt(reached * kappa)
+    sol.steps = records if sol.converged else sol.steps
+    sol.linear_iterations, sol.assembly_time_s, sol.solve_time_s = linear, assembly, solve_time
+    sol.wall_time_s = time.perf_counter() - t0
+    return sol, first
+
+
+def _copy_state(source: MixedForm, target: MixedForm) -> None:
+    """``target`` (same mesh and spaces) at ``source``'s state, load and contact pressures."""
+    target.gfu.vec.data = source.gfu.vec
+    target.restore_multipliers(source.multiplier_state())
+    target.set_load(float(source.load.Get()))
+    x = target.gfu.vec.FV().NumPy()
+    for pc in target.point_contacts:
+        pc.update(x)
