@@ -105,16 +105,23 @@ def test_paper_sized_mesh_quality_and_volumes() -> None:
 
 
 @pytest.mark.slow
-def test_fitted_interfaces_solve_the_left_flap_left_swelling_scenario(tmp_path) -> None:
+def test_fitted_interfaces_solve_the_left_flap_left_swelling_scenario(tmp_path, caplog) -> None:
     """The template with fitted tissue interfaces solves the left flap / left swelling
     scenario without a rejected load step (with the left cutter 60 mm deep, a pressed
     contact point on its inner corner in the middle cranial fossa stalled Newton beyond
-    load 0.95)."""
+    load 0.95), every tangent in PARDISO's symmetric mode: its pressure zones have small
+    islands (two CSF tets sharing a vertex), whose singular pressure constants defeated
+    Bunch-Kaufman's 2x2 pivots (relative residuals up to 1e2, LU for the rest of the run)."""
+    import logging
+
     from brainbulge.studies.craniectomy import run_brain
 
     mesh = build_brain_mesh(target_tets=30_000, fit_tissue_interfaces=True)
-    summary = run_brain({"flap": "left", "swell": "left", "steps": 2}, tmp_path,
-                        brain_mesh=mesh)
+    with caplog.at_level(logging.DEBUG, logger="brainbulge.solver.linear.direct"):
+        summary = run_brain({"flap": "left", "swell": "left", "steps": 2}, tmp_path,
+                            brain_mesh=mesh)
     assert summary["converged"]
     assert summary["rejected_steps"] == 0
     assert summary["newton_iterations"] <= 8
+    misses = [r for r in caplog.records if "PARDISO symmetric mode" in r.getMessage()]
+    assert not misses, misses[0].getMessage()
