@@ -32,7 +32,9 @@ The carried-over state (:func:`interpolate_state`):
   inside the skull, up to 0.70 mm), except where that would fold an element
   (:func:`press_onto_obstacles`).
 
-If Newton does not converge from that start, the fine mesh ramps the load from ``Js = 1``
+Newton on the fine mesh walks from that start through the regions' stiffness contrast
+(:mod:`brainbulge.solver.contrast`: the soft CSF first as stiff as gray matter, then its own
+stiffness in steps). If that does not converge, the fine mesh ramps the load from ``Js = 1``
 as without sequencing: sequencing never ends a run that the plain ramp would finish.
 
 P1-based displacements (MINI) only: the vertex values are all the state there is (the
@@ -193,9 +195,10 @@ def solve_sequenced(
     coarse: MixedForm, fine: MixedForm, options: SolverOptions
 ) -> tuple[Solution, Sequenced]:
     """Ramp the load on ``coarse``, carry its state to ``fine`` and converge there at full
-    load; if that fails, ramp on ``fine`` from ``Js = 1``. Returns the fine solution (its
-    times and Krylov iterations include the coarse stage, its Newton iterations are the fine
-    mesh's) and the coarse stage's record; the linear solvers' memory is released.
+    load through the stiffness contrast (:func:`equilibrate_through_contrast`); if that
+    fails, ramp on ``fine`` from ``Js = 1``. Returns the fine solution (its times and Krylov
+    iterations include the coarse stage, its Newton iterations are the fine mesh's, one step
+    record per contrast) and the coarse stage's record; the linear solvers' memory is released.
     ``options`` apply to both meshes (the coarse one without restart file or progress bar,
     and to :data:`COARSE_TOLERANCE`)."""
     t0 = time.perf_counter()
