@@ -74,11 +74,10 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
                                  ) -> tuple[Solution, float | None]:
     """Newton at ``form``'s load through the contrast path (module docstring); ``start(f)``
     puts the start state into a form ``f`` on ``form``'s mesh (e.g. carries a coarse state
-    over). Returns the scaled residual of the start state (on the first step's form) and the
-    solution on ``form``, its Newton iterations, Krylov iterations and
-    times those of the whole path (one :class:`StepRecord` per step taken); ``converged``
-    false if the path gave up (``form``'s state is then not an equilibrium). The linear solvers'
-    memory is released."""
+    over). Returns the solution on ``form`` (Newton and Krylov iterations and times of the
+    whole path, one :class:`StepRecord` per contrast; ``converged`` false if the path gave
+    up, and ``form``'s state is then not an equilibrium) and the scaled residual of the start
+    state on the first step's form. The linear solvers' memory is released."""
     t0 = time.perf_counter()
     problem = form.problem
     path = contrast_path(problem.materials)
