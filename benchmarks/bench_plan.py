@@ -6,7 +6,8 @@ builds (or reads) the ICBM152 mesh, places the centres, runs the plan on a local
 (``--workers``) or ``--scheduler serial``, and prints one row per plan (Newton iterations,
 warm start, solve s)
 and the totals: plans run, wall time, time per plan, the recommendation. ``--cold`` runs
-every plan from ``Js = 1`` (no warm starts), for comparison.
+every plan from ``Js = 1`` (no warm starts), for comparison; ``--linear-solver`` overrides the
+product's choice for the mesh's size.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ def main() -> None:
     ap.add_argument("--scheduler", default=None)
     ap.add_argument("--tolerance", type=float, default=1e-9)
     ap.add_argument("--cold", action="store_true", help="no warm starts")
+    ap.add_argument("--linear-solver", default=None, choices=["pardiso", "krylov"],
+                    help="default: the product's for the mesh's size")
     ap.add_argument("--edge-radius", type=float, default=None,
                     help="skull edge radius [mm] (default: the product's)")
     ap.add_argument("--out", default=None)
@@ -48,7 +51,7 @@ def main() -> None:
     t_mesh = time.perf_counter() - t0
     radius = {} if args.edge_radius is None else {"edge_radius_mm": args.edge_radius}
     base = CraniectomyCase(flap="none", swell=args.swell, mesh=str(Path(mesh).resolve()),
-                           linear_solver="krylov", tolerance=args.tolerance, **radius)
+                           linear_solver=args.linear_solver, tolerance=args.tolerance, **radius)
     bm = planner.shared_mesh(base.mesh)
     centres = planner.centres_for(bm, args.swell, args.centres, None, base.superior_band())
     cases = planner.plan_cases(base, bm, centres, args.diameters)
