@@ -85,3 +85,21 @@ def test_the_path_ends_at_the_models_equilibrium() -> None:
     assert np.abs(x - x_ref).max() < 1e-4 * np.abs(x_ref).max()
     lam, lam_ref = fine.point_contacts[0].lam, reference.point_contacts[0].lam
     assert np.abs(lam - lam_ref).max() < 1e-4 * lam_ref.max()
+
+
+def test_a_step_without_progress_ends_the_path_and_the_ramp_takes_over(monkeypatch) -> None:
+    """A contrast step whose residual does not fall fast enough gives up (here: a
+    requirement no Newton iteration meets); mesh sequencing then ramps the fine mesh's load
+    and still reaches the model's equilibrium."""
+    from brainbulge.solver import contrast as contrast_module
+
+    monkeypatch.setattr(contrast_module, "REQUIRED_PROGRESS", (1, 1e-30))
+    options = SolverOptions(steps=2)
+    coarse, fine = _soft_matrix_forms()
+    sol, record = solve_sequenced(coarse, fine, options)
+    assert record.coarse_converged and not record.fine_converged
+    assert sol.converged and sol.steps[-1].load == 1.0 and len(sol.steps) >= 2  # the ramp
+    _, reference = _soft_matrix_forms()
+    assert NewtonSolver(reference, options).solve().converged
+    x, x_ref = fine.u.vec.FV().NumPy(), reference.u.vec.FV().NumPy()
+    assert np.abs(x - x_ref).max() < 1e-4 * np.abs(x_ref).max()

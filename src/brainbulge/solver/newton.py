@@ -61,6 +61,9 @@ class NewtonSolver(MixedEquations):
         self.tolerance = self.opt.tolerance  # of the next Newton solve (set by the ramp)
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.failure_site: np.ndarray | None = None  # of the last Newton solve that failed
+        #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
+        #: after ``k`` iterations gives up (None: no such requirement)
+        self.required_progress: tuple[int, float] | None = None
         self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
         self.relaxation = (HotspotRelaxation(self) if HotspotRelaxation.applies(form)
                            else None)
@@ -137,6 +140,11 @@ class NewtonSolver(MixedEquations):
             if norm <= self.tolerance:
                 return True, it, norm
             if not np.isfinite(norm) or it == self.opt.max_iterations:
+                return False, it, norm
+            if (self.required_progress is not None and it == self.required_progress[0]
+                    and norm > self.required_progress[1] * self.history[-1][0]):
+                log.debug("    too slow: |R| %.3e after %d iterations from %.3e", norm, it,
+                          self.history[-1][0])
                 return False, it, norm
             K_x = None  # the tangent at x0, shared by the retries of this iteration
             self.last_linear_solution = None  # and the last direction, their Krylov guess
