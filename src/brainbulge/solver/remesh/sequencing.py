@@ -197,8 +197,9 @@ def solve_sequenced(
     """Ramp the load on ``coarse``, carry its state to ``fine`` and converge there at full
     load through the stiffness contrast (:func:`equilibrate_through_contrast`); if that
     fails, ramp on ``fine`` from ``Js = 1``. Returns the fine solution (its times and Krylov
-    iterations include the coarse stage, its Newton iterations are the fine mesh's, one step
-    record per contrast) and the coarse stage's record; the linear solvers' memory is released.
+    iterations include the coarse stage, its Newton iterations are the fine mesh's, all
+    contrast steps in one record) and the coarse stage's record; the linear solvers' memory
+    is released.
     ``options`` apply to both meshes (the coarse one without restart file or progress bar,
     and to :data:`COARSE_TOLERANCE`)."""
     t0 = time.perf_counter()
