@@ -8,10 +8,10 @@ from scipy.spatial import Delaunay
 
 from brainbulge.geometry.brain import MidSagittalPlane
 from brainbulge.results.brain_metrics import (
+    MonroLocation,
     brain_volume_ml,
     bulge_volume_ml,
-    midline_shift_mm,
-    monro_z_range_mm,
+    monro_midline_shift_mm,
     positive_fraction,
     prescribed_swelling_volume_ml,
     swelling_volume_ml,
@@ -47,39 +47,47 @@ def test_positive_fraction_closed_forms() -> None:
     assert got[6] == pytest.approx(((lam @ f[6]) > 0).mean(), abs=3e-3)
 
 
+WHOLE = (40.0, 40.0)  # a window over the whole test box
+
+
 def test_midline_shift_of_a_translation_is_signed() -> None:
-    nodes, _ = box_mesh(6, -30.0, 30.0)
+    nodes, tets = box_mesh(6, -30.0, 30.0)
     plane = MidSagittalPlane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    centre = MonroLocation((0.0, 0.0, 0.0), "template")
     for d in (2.5, -1.5):
         u = np.zeros_like(nodes)
         u[:, 0] = d
-        out = midline_shift_mm(nodes, u, plane)
+        out = monro_midline_shift_mm(nodes, tets, u, plane, centre, window_mm=WHOLE)
         assert out["midline_shift_mm"] == pytest.approx(d)
-        assert out["midline_nodes"] == 7 * 7
+        assert out["midline_shift_samples"] == 61 * 61  # the plane's 1 mm grid in the box
         assert out["midline_shift_point_mm"][0] == pytest.approx(0.0)
     # a plane normal that points left reports the same motion with the opposite sign
     left = MidSagittalPlane((0.0, 0.0, 0.0), (-2.0, 0.0, 0.0))
-    assert midline_shift_mm(nodes, u, left)["midline_shift_mm"] == pytest.approx(1.5)
+    out = monro_midline_shift_mm(nodes, tets, u, left, centre, window_mm=WHOLE)
+    assert out["midline_shift_mm"] == pytest.approx(1.5)
 
 
-def test_midline_shift_selects_plane_region_and_level() -> None:
-    nodes, _ = box_mesh(6, -30.0, 30.0)  # nodes every 10 mm
+def test_midline_shift_selects_tissue_and_window() -> None:
+    """Interpolated at points of the plane (not at nodes near it): a displacement off the
+    plane enters only through the tets the plane cuts; the window and the tissue mask choose
+    where the largest ``|u . n|`` is looked for."""
+    nodes, tets = box_mesh(6, -30.0, 30.0)  # nodes every 10 mm
     plane = MidSagittalPlane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    centre = MonroLocation((0.0, 0.0, 0.0), "template")
     u = np.zeros_like(nodes)
     u[:, 0] = 0.1 * nodes[:, 2] - 0.05 * nodes[:, 1]  # largest at z = 30, y = -30
-    u[np.abs(nodes[:, 0]) > 5, 0] = 50.0  # off the plane: must not count
-    out = midline_shift_mm(nodes, u, plane, tol_mm=1.0)
+    out = monro_midline_shift_mm(nodes, tets, u, plane, centre, window_mm=WHOLE)
     assert out["midline_shift_mm"] == pytest.approx(4.5)
     assert out["midline_shift_point_mm"] == pytest.approx([0.0, -30.0, 30.0])
-    out = midline_shift_mm(nodes, u, plane, z_range_mm=(-15.0, 15.0))
-    assert out["midline_shift_mm"] == pytest.approx(2.5)
-    assert out["midline_nodes"] == 7 * 3
-    mask = nodes[:, 1] > 0
-    out = midline_shift_mm(nodes, u, plane, region_mask=mask, z_range_mm=(-35.0, -25.0))
+    out = monro_midline_shift_mm(nodes, tets, u, plane, centre, window_mm=(40.0, 15.0))
+    assert out["midline_shift_mm"] == pytest.approx(3.0)  # z = 15, y = -30
+    y_positive = nodes[tets].mean(axis=1)[:, 1] > 0
+    out = monro_midline_shift_mm(nodes, tets, u, plane, centre, window_mm=WHOLE,
+                                 tissue_tets=y_positive)
     assert out["midline_shift_mm"] == pytest.approx(-4.5)  # z = -30, y = 30
     assert out["midline_shift_point_mm"] == pytest.approx([0.0, 30.0, -30.0])
-    assert midline_shift_mm(nodes, u, plane, z_range_mm=(100, 200))["midline_nodes"] == 0
-    assert monro_z_range_mm(4.0) == pytest.approx((8.0, 16.0))
+    far = MonroLocation((0.0, 0.0, 200.0), "template")
+    assert monro_midline_shift_mm(nodes, tets, u, plane, far)["midline_shift_samples"] == 0
 
 
 def test_brain_and_swelling_volumes() -> None:

@@ -8,8 +8,8 @@ prescribed displacements.
 - :func:`locate_monro` and :func:`monro_midline_shift_mm`: the clinical midline shift, the
   lateral displacement of the mid-sagittal tissue at the level of the foramen of Monro
   (the septum pellucidum), signed: positive towards the patient's right (+x in RAS).
-- :func:`midline_shift_mm`: the largest lateral displacement of any tissue that starts on the
-  mid-sagittal plane, at any height (``max_midline_displacement_mm``).
+  Over a window that covers the whole brain, the same function gives the largest lateral
+  displacement of the mid-sagittal tissue at any height (``max_midline_displacement_mm``).
 - :func:`bulge_volume_ml`: tissue volume outside the intact skull in the deformed configuration.
 - :func:`brain_volume_ml`, :func:`swelling_volume_ml`, :func:`prescribed_swelling_volume_ml`.
 
@@ -116,13 +116,16 @@ def monro_midline_shift_mm(
     monro: MonroLocation,
     tissue_tets: np.ndarray | None = None,
     spacing_mm: float = 1.0,
+    window_mm: tuple[float, float] = MONRO_WINDOW_MM,
 ) -> dict:
     """The clinical midline shift (mm): lateral displacement of the mid-sagittal tissue at the
     level of the foramen of Monro, signed (positive towards the patient's right).
 
     ``u`` is interpolated (P1) at the points of a grid of ``spacing_mm`` on the mid-sagittal
-    plane within ``MONRO_WINDOW_MM`` of ``monro.point_mm`` (anterior-posterior, inferior-
-    superior) that lie in ``tissue_tets`` (bool per tet, e.g. the parenchyma; default all);
+    plane within ``window_mm`` (default ``MONRO_WINDOW_MM``) of ``monro.point_mm``
+    (anterior-posterior, inferior-superior; a window over the whole brain gives the whole
+    plane's largest displacement, on a grid that contains the Monro window's points) that lie
+    in ``tissue_tets`` (bool per tet, e.g. the parenchyma; default all);
     ``d = u . n`` with ``n`` the plane's unit normal, and the shift is the ``d`` of largest
     ``|d|`` there. Interpolating at points of the plane, not taking nodes near it, makes the
     value independent of where the mesh happens to have nodes.
@@ -137,7 +140,7 @@ def monro_midline_shift_mm(
     e_y /= np.linalg.norm(e_y)
     e_z = np.cross(n, e_y)
     e_z *= np.sign(e_z[2]) or 1.0
-    hy, hz = MONRO_WINDOW_MM
+    hy, hz = window_mm
     a = np.arange(-hy, hy + 1e-9, spacing_mm)
     b = np.arange(-hz, hz + 1e-9, spacing_mm)
     A, B = (g.ravel() for g in np.meshgrid(a, b, indexing="ij"))
@@ -190,55 +193,6 @@ def interpolate_p1(nodes_mm: np.ndarray, tets: np.ndarray, values: np.ndarray,
         out[hit] = np.einsum("pk,pk...->p...", bary[inside], V[t[inside]])
         found[hit] = True
     return out, found
-
-
-def monro_z_range_mm(half_width_mm: float = 5.0,
-                     monro_mm: tuple[float, float, float] = MONRO_MNI_MM) -> tuple[float, float]:
-    """The band ``z_monro +- half_width_mm`` (mm) at the level of the foramen of Monro."""
-    z = float(monro_mm[2])
-    return (z - half_width_mm, z + half_width_mm)
-
-
-def midline_shift_mm(
-    nodes_mm: np.ndarray,
-    u_mm: np.ndarray,
-    plane: MidSagittalPlane,
-    tol_mm: float = 1.0,
-    region_mask: np.ndarray | None = None,
-    z_range_mm: tuple[float, float] | None = None,
-) -> dict:
-    """Largest lateral displacement of the tissue that starts on the mid-sagittal plane (mm),
-    at any height: ``max_midline_displacement_mm`` of the summaries (the clinical midline
-    shift is :func:`monro_midline_shift_mm`).
-
-    With ``n`` the plane's unit normal (towards the patient's right) and ``p`` its point, the
-    midline nodes are those with ``|(X - p) . n| <= tol_mm`` in the reference configuration,
-    optionally also in ``region_mask`` (bool per node, e.g. parenchyma nodes) and with
-    ``z_range_mm[0] <= X_z <= z_range_mm[1]``. Their lateral displacement is ``d = u . n`` and
-    the shift is the ``d`` of largest ``|d|``, so it is signed: positive towards the right.
-
-    Returns ``{"midline_shift_mm": float, "midline_shift_point_mm": [x, y, z] (reference
-    position of that node), "midline_nodes": int}``; with no midline node the shift is ``nan``
-    and the point ``None``.
-    """
-    X = np.asarray(nodes_mm, dtype=float)
-    u = np.asarray(u_mm, dtype=float)
-    n = np.asarray(plane.normal, dtype=float)
-    n = n / np.linalg.norm(n)
-    on_plane = np.abs((X - np.asarray(plane.point_mm, dtype=float)) @ n) <= tol_mm
-    if region_mask is not None:
-        on_plane &= np.asarray(region_mask, dtype=bool)
-    if z_range_mm is not None:
-        on_plane &= (X[:, 2] >= z_range_mm[0]) & (X[:, 2] <= z_range_mm[1])
-    idx = np.flatnonzero(on_plane)
-    if idx.size == 0:
-        return {"midline_shift_mm": float("nan"), "midline_shift_point_mm": None,
-                "midline_nodes": 0}
-    d = u[idx] @ n
-    k = int(np.argmax(np.abs(d)))
-    return {"midline_shift_mm": float(d[k]),
-            "midline_shift_point_mm": [float(c) for c in X[idx[k]]],
-            "midline_nodes": int(idx.size)}
 
 
 def brain_volume_ml(nodes_mm: np.ndarray, tets: np.ndarray,

@@ -9,7 +9,8 @@ Every key says what its value is (lengths mm, volumes ml, stresses kPa):
   was measured (``template`` coordinates, the segmentation's ``labels``, or the template's
   location mapped by the ``bounding box``, which is also logged as a warning).
 - ``max_midline_displacement_mm``: the largest lateral displacement of any parenchyma that
-  starts on the mid-sagittal plane, at any height.
+  starts on the mid-sagittal plane, at any height (the same 1 mm grid of the plane as the
+  Monro shift's, over the whole brain).
 - ``white_matter_volume_ml``: reference volume of the white matter that swells;
   ``swelling_volume_ml`` (from the summary): the added volume ``int (Js - 1) dV``, i.e.
   ``(Js - 1)`` times that volume.
@@ -34,7 +35,6 @@ import numpy as np
 from brainbulge.results.brain_metrics import (
     MonroLocation,
     locate_monro,
-    midline_shift_mm,
     monro_midline_shift_mm,
 )
 
@@ -89,7 +89,9 @@ def brain_outputs(
     out["monro_location_mm"] = list(monro.point_mm)
     out["monro_location_source"] = monro.source
     warn_if_guessed(monro)
-    whole = midline_shift_mm(bm.nodes_mm, u_mm, bm.midsagittal, region_mask=par_nodes)
+    reach = float(np.ceil(np.abs(bm.nodes_mm - np.asarray(monro.point_mm)).max()))
+    whole = monro_midline_shift_mm(bm.nodes_mm, bm.tets, u_mm, bm.midsagittal, monro,
+                                   tissue_tets=par_tets, window_mm=(reach, reach))
     out["max_midline_displacement_mm"] = whole["midline_shift_mm"]
     out["max_midline_displacement_point_mm"] = whole["midline_shift_point_mm"]
     vols = bm.region_volumes_ml()

@@ -1,8 +1,9 @@
 """The labelled brain mesh and the pipeline that builds it from a tissue image.
 
 ``build_brain_mesh`` runs: tissue image -> (optional scaling to a brain volume) -> intracranial
-envelope (skull's inner surface) -> Netgen tetrahedra -> tissue and hemisphere tags -> outer
-surface with base, skull and flaps. All lengths are world millimetres (RAS+), volumes ml.
+envelope (skull's inner surface) -> Netgen tetrahedra -> tissue and hemisphere tags -> tissue
+interfaces fitted to the smoothed label surfaces -> outer surface with base, skull and flaps.
+All lengths are world millimetres (RAS+), volumes ml.
 """
 
 from __future__ import annotations
@@ -196,7 +197,7 @@ def build_brain_mesh(
     refinements: int = 0,
     refine_onto_envelope: bool = True,
     keep_unrefined: bool = False,
-    fit_tissue_interfaces: bool = False,
+    fit_tissue_interfaces: bool = True,
 ) -> BrainMesh:
     """Build the labelled brain mesh (see module docstring).
 
@@ -209,14 +210,15 @@ def build_brain_mesh(
     ``custom`` when its centre is given. ``refinements``: Netgen meshes at about
     ``target_tets / 8**refinements`` tets, which is then refined uniformly that many times
     (:mod:`refine`: new surface nodes on the envelope), so that mesh sequencing can start
-    from the exact coarse solution; tissues, sides and flaps are tagged on the final mesh.
+    from the exact coarse solution: tissues are tagged (and their interfaces fitted) on the
+    Netgen mesh and every child tet keeps its parent's, so the refined mesh's interfaces are
+    the Netgen mesh's; sides, base and flaps are tagged on the final mesh.
     ``refine_onto_envelope=False`` leaves the new surface nodes at their midpoints: the
     refined mesh then has exactly the Netgen mesh's geometry (its surface chords), the
     geometry a Taylor-Hood solution on the Netgen mesh sees, for comparisons of elements and
     mesh sizes on one geometry. ``fit_tissue_interfaces``: move the tissue interfaces' nodes
     onto smoothed label surfaces (:mod:`interfaces`) instead of the voxel staircase of the
-    tags; off by default: on the 21k-tet template its scenarios take as many Newton iterations
-    but 1.6-4.3x the direct-solve time (PARDISO's symmetric mode fails on its tangents).
+    tags (``False``: the staircase, kept for comparisons in ``benchmarks/``).
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -250,41 +252,52 @@ def build_brain_mesh(
                          "too coarse for the brain): ask for fewer refinements or more tets")
     t0 = time.perf_counter()
     h_mm = element_size_for(envelope.volume_ml(), target_tets / 8**refinements)
-    nodes, tets = netgen_mesh = mesh_intracranial_volume(envelope, h_mm)
+    nodes, tets = mesh_intracranial_volume(envelope, h_mm)
     timings["tetmesh"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    nodes, tissue = _tissues(nodes, tets, image, envelope, midsagittal, fit_tissue_interfaces)
+    timings["tags"] = time.perf_counter() - t0
+    netgen_mesh = nodes, tets, tissue
     if refinements:
         t0 = time.perf_counter()
-        nodes, tets = refined_on_envelope(nodes, tets, envelope, refinements,
-                                          move=refine_onto_envelope)
+        nodes, tets, parent = refined_on_envelope(nodes, tets, envelope, refinements,
+                                                  move=refine_onto_envelope)
+        tissue = tissue[parent]
         timings["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     if base_z_mm is None:
         z = nodes[:, 2]
         base_z_mm = float(z.min() + BASE_FRACTION * (z.max() - z.min()))
-    def label(nodes: np.ndarray, tets: np.ndarray) -> BrainMesh:
-        return _labelled(nodes, tets, image, envelope, midsagittal, base_z_mm,
-                         custom_flap_centre_mm, custom_flap_diameter_mm, frontal_area_ratio,
-                         fit_tissue_interfaces)
+    def label(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray) -> BrainMesh:
+        return _labelled(nodes, tets, tissue, image, envelope, midsagittal, base_z_mm,
+                         custom_flap_centre_mm, custom_flap_diameter_mm, frontal_area_ratio)
 
-    mesh = label(nodes, tets)
+    mesh = label(nodes, tets, tissue)
     if keep_unrefined and refinements:
         mesh.unrefined = label(*netgen_mesh)
-    timings["tags"] = time.perf_counter() - t0
+    timings["boundaries"] = time.perf_counter() - t0
     mesh.timings_s = timings
     return mesh
 
 
-def _labelled(nodes: np.ndarray, tets: np.ndarray, image: TissueImage,
-              envelope: IntracranialEnvelope, midsagittal: MidSagittalPlane, base_z_mm: float,
-              custom_flap_centre_mm: tuple[float, float, float] | None,
-              custom_flap_diameter_mm: float, frontal_area_ratio: float,
-              fit_tissue_interfaces: bool = False) -> BrainMesh:
-    """``(nodes, tets)`` with tissues, sides, the base below ``base_z_mm`` and the flaps."""
+def _tissues(nodes: np.ndarray, tets: np.ndarray, image: TissueImage,
+             envelope: IntracranialEnvelope, midsagittal: MidSagittalPlane,
+             fit_tissue_interfaces: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The tissue of every tet (volume-matched tags, :func:`tag_tissue`), and the nodes with
+    the interfaces fitted to the smoothed label surfaces (:func:`fit_interfaces`)."""
     tissue = tag_tissue(image, nodes, tets, intracranial_volume_ml=envelope.volume_ml(),
                         plane=midsagittal)
     if fit_tissue_interfaces:
         nodes, tissue = fit_interfaces(nodes, tets, tissue, image, envelope.volume_ml())
+    return nodes, tissue
+
+
+def _labelled(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, image: TissueImage,
+              envelope: IntracranialEnvelope, midsagittal: MidSagittalPlane, base_z_mm: float,
+              custom_flap_centre_mm: tuple[float, float, float] | None,
+              custom_flap_diameter_mm: float, frontal_area_ratio: float) -> BrainMesh:
+    """``(nodes, tets)`` with ``tissue``, sides, the base below ``base_z_mm`` and the flaps."""
     side = midsagittal.side(nodes[tets].mean(axis=1))
     faces, face_tet = boundary_faces(tets)
     base = nodes[faces][:, :, 2].mean(axis=1) < base_z_mm
@@ -303,13 +316,18 @@ def _labelled(nodes: np.ndarray, tets: np.ndarray, image: TissueImage,
 
 
 def refined_on_envelope(nodes: np.ndarray, tets: np.ndarray, envelope: IntracranialEnvelope,
-                        refinements: int, move: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                        refinements: int, move: bool = True
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``refinements`` uniform refinements of ``(nodes, tets)`` (mm), each followed by moving
-    the new surface nodes onto the envelope (:mod:`refine`) unless ``move`` is false."""
+    the new surface nodes onto the envelope (:mod:`refine`) unless ``move`` is false.
+    Returns ``(nodes, tets, parent)``: ``parent[i]`` is the original tet that tet ``i`` lies in
+    (interior nodes stay at edge midpoints, so tissue interfaces keep their shape)."""
     skull = RigidSkull(envelope, None)
+    parent = np.arange(len(tets))
     for _ in range(refinements):
         n_old = len(nodes)
-        nodes, tets, _, _ = refine_uniformly(nodes, tets)
+        nodes, tets, p, _ = refine_uniformly(nodes, tets)
+        parent = parent[p]
         if not move:
             log.info("refined: %d tets, new surface nodes left at their midpoints", len(tets))
             continue
@@ -319,7 +337,7 @@ def refined_on_envelope(nodes: np.ndarray, tets: np.ndarray, envelope: Intracran
         nodes, stayed = move_onto_surface(nodes, tets, surface_new, skull.envelope_distance)
         log.info("refined: %d tets, %d new surface nodes moved onto the envelope (%d kept at "
                  "their midpoint)", len(tets), len(surface_new) - stayed, stayed)
-    return nodes, tets
+    return nodes, tets, parent
 
 
 def _component_nearest(faces: np.ndarray, mask: np.ndarray, centroids: np.ndarray,
