@@ -136,6 +136,30 @@ def test_sequenced_solve_reaches_the_fine_solution_in_fewer_iterations(ramp) -> 
     assert sol.max_penetration < 1e-5
 
 
+def test_a_solved_coarse_form_is_carried_over_without_a_new_solve(ramp, monkeypatch) -> None:
+    """``coarse_solution``: the coarse form already at its equilibrium (the previous member of
+    a mesh family) is carried over as it is, to the same fine state."""
+    fine_ref, _ = ramp
+    coarse, fine = _forms()
+    csol = NewtonSolver(coarse, OPTIONS).solve()
+    assert csol.converged
+
+    solved = []
+    init = NewtonSolver.__init__
+
+    def spy(self, form, *args, **kwargs):
+        solved.append(form)
+        init(self, form, *args, **kwargs)
+
+    monkeypatch.setattr(NewtonSolver, "__init__", spy)
+    sol, record = solve_sequenced(coarse, fine, OPTIONS, coarse_solution=csol)
+    assert sol.converged and record.fine_converged
+    assert record.coarse_newton_iterations == csol.newton_iterations
+    assert not any(form is coarse for form in solved)
+    u_ref = _vertex_u(fine_ref)
+    assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
+
+
 def test_sequencing_falls_back_to_the_ramp(ramp, monkeypatch) -> None:
     fine_ref, _ = ramp
 

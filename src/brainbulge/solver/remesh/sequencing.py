@@ -192,7 +192,8 @@ COARSE_TOLERANCE = 1e-4
 
 
 def solve_sequenced(
-    coarse: MixedForm, fine: MixedForm, options: SolverOptions
+    coarse: MixedForm, fine: MixedForm, options: SolverOptions,
+    coarse_solution: Solution | None = None,
 ) -> tuple[Solution, Sequenced]:
     """Ramp the load on ``coarse``, carry its state to ``fine`` and converge there at full
     load through the stiffness contrast (:func:`equilibrate_through_contrast`); if that
@@ -201,13 +202,17 @@ def solve_sequenced(
     contrast steps in one record) and the coarse stage's record; the linear solvers' memory
     is released.
     ``options`` apply to both meshes (the coarse one without restart file or progress bar,
-    and to :data:`COARSE_TOLERANCE`)."""
+    and to :data:`COARSE_TOLERANCE`). ``coarse_solution``: ``coarse`` already holds this
+    solution (e.g. the previous member of a mesh family), so it is not solved again."""
     t0 = time.perf_counter()
-    coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False,
-                                     tolerance=max(options.tolerance, COARSE_TOLERANCE))
-    coarse_solver = NewtonSolver(coarse, coarse_opt)
-    csol = coarse_solver.solve()
-    coarse_solver.release_linear_solver()
+    if coarse_solution is None:
+        coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False,
+                                         tolerance=max(options.tolerance, COARSE_TOLERANCE))
+        coarse_solver = NewtonSolver(coarse, coarse_opt)
+        csol = coarse_solver.solve()
+        coarse_solver.release_linear_solver()
+    else:
+        csol = coarse_solution
     log.info("  coarse mesh (%d elements): load %.4f in %d Newton iterations, %.1f s",
              coarse.mesh.ne, csol.load, csol.newton_iterations, csol.wall_time_s)
     record = Sequenced(coarse.mesh.ne, csol.converged, csol.newton_iterations,
