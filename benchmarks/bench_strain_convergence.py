@@ -9,9 +9,9 @@ member solves the left-flap, both-sided scenario (MINI, Js 1 -> 1.1; each finer 
 mesh sequencing from the previous member's solution, GMRES with AMG blocks). Per member, the
 table gives the volume percentiles p95 / p99 of the maximum principal strain and of the
 radial and tangential stretch over the parenchyma outside the 5 mm rim band, their maximum
-there and the value they exceed in 0.1 ml of it, from the raw element gradient ``Grad u`` and
-from the recovered gradient (``brainbulge.results.recovery``, what the summaries report), and
-the change from the previous member in per cent.
+there and the value they exceed in 0.1 ml of it (``peak``, as in the summaries), from the raw
+element gradient ``Grad u`` and from the recovered gradient (``brainbulge.results.recovery``,
+what the summaries report), and the change from the previous member in per cent.
 
 A 2-core machine affords two members from a ~20k-tet base (about 21k and 168k tets); the
 next (1.35M) needs ~10 GB and about an hour.
@@ -58,8 +58,8 @@ def percentiles(form, bm, case, recovered: bool) -> dict[str, float]:
     from brainbulge.results.fields import output_fields, sample
     from brainbulge.results.quadrature import quadrature_points
     from brainbulge.results.recovery import recovered_gradient
-    from brainbulge.results.summary import weighted_percentiles
-    from brainbulge.studies.craniectomy import PARENCHYMA
+    from brainbulge.results.summary import exceeded_in, weighted_percentiles
+    from brainbulge.studies.craniectomy import PARENCHYMA, PEAK_VOLUME_ML
 
     q = quadrature_points(form.mesh, order=4)
     G = recovered_gradient(form.mesh, form.output_displacement()) if recovered else None
@@ -89,20 +89,8 @@ def percentiles(form, bm, case, recovered: bool) -> dict[str, float]:
         p95, p99 = weighted_percentiles(v, w, (95, 99))
         out[f"p95 {short}"], out[f"p99 {short}"] = float(p95), float(p99)
         out[f"max {short}"] = float(v.max())
-        out[f"top{PEAK_VOLUME_ML} {short}"] = exceeded_in(v, w, PEAK_VOLUME_ML * 1e3)
+        out[f"peak {short}"] = exceeded_in(v, w, PEAK_VOLUME_ML * 1e3)
     return out
-
-
-#: the peak reported beside the maximum: the value exceeded in this much tissue (ml)
-PEAK_VOLUME_ML = 0.1
-
-
-def exceeded_in(v: np.ndarray, w: np.ndarray, volume_mm3: float) -> float:
-    """The value ``t`` that ``v`` exceeds on a volume ``volume_mm3`` of the weights ``w``:
-    ``|{x : v(x) >= t}| >= volume_mm3`` with the largest such ``t``."""
-    order = np.argsort(v)[::-1]
-    above = np.cumsum(w[order])
-    return float(v[order][min(np.searchsorted(above, volume_mm3), len(v) - 1)])
 
 
 def main() -> int:
@@ -147,7 +135,7 @@ def main() -> int:
         print(f"level {level}: {row['tets']} tets, converged {sol.converged}, "
               f"{row['solve s']:.0f} s", flush=True)
         previous, previous_sol = form, sol
-    keys = [k for k in rows[0] if k.split()[0] in ("p95", "p99", "max", f"top{PEAK_VOLUME_ML}")]
+    keys = [k for k in rows[0] if k.split()[0] in ("p95", "p99", "peak", "max")]
     print("\nchange from the previous member: of the value; for stretches also of lambda - 1")
     print("\n| quantity | " + " | ".join(f"{r['tets']:,} tets" for r in rows) + " |")
     print("|---" * (len(rows) + 1) + "|")

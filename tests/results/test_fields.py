@@ -192,6 +192,27 @@ def test_weighted_percentiles_sort_only_the_tail_and_match_numpy(n: int) -> None
         weighted_percentiles(v, w, (5, 95))
 
 
+@pytest.mark.parametrize("n", [7, 5_000, 200_000])
+def test_the_value_exceeded_in_a_volume(n: int) -> None:
+    """``exceeded_in``: the largest ``t`` whose super-level set ``{v >= t}`` holds the
+    volume, against a full sort; on a field uniform over a unit volume it is the quantile."""
+    from brainbulge.results.summary import exceeded_in
+
+    rng = np.random.default_rng(n)
+    v, w = np.round(rng.normal(size=n), 2), rng.uniform(0, 1, n) ** 3  # ties, graded
+    for volume in (1e-9, 0.3, 0.1 * w.sum(), w.sum(), 2 * w.sum()):
+        order = np.argsort(v)[::-1]
+        above = np.cumsum(w[order])
+        expected = v[order][min(np.searchsorted(above, volume), n - 1)]
+        got = exceeded_in(v, w, volume)
+        assert got == expected
+        if volume <= w.sum():
+            assert w[v >= got].sum() >= volume * (1 - 1e-12)
+            assert w[v > got].sum() < volume
+    x = (np.arange(n) + 0.5) / n  # v = x on [0, 1], cells of volume 1/n
+    assert exceeded_in(x, np.full(n, 1 / n), 0.1) == pytest.approx(0.9, abs=1.5 / n)
+
+
 def test_mini_outputs_are_those_of_its_p1_part() -> None:
     """MINI's sampled displacement gradient is that of its P1 part: the element mean of the
     full ``grad u`` (the bubbles' gradients average to zero over each element, where they do

@@ -28,7 +28,8 @@ cerebellum, brainstem) outside a band of ``edge_exclusion_mm`` around the flap r
 stress is singular; ``raw_*`` over all parenchyma, ``csf_*`` over the CSF filler. The
 extremes sit at tissue interfaces (singular too) and grow under refinement; the volume
 percentiles ``p95_*``/``p99_*``/``p05_*``/``p01_*`` over the same points are the
-mesh-convergent measures (docs/outputs.md).
+mesh-convergent measures, and ``peak_*`` (the value exceeded in ``PEAK_VOLUME_ML`` of that
+tissue) the peaks to compare between meshes (docs/outputs.md).
 """
 
 from __future__ import annotations
@@ -75,6 +76,8 @@ log = logging.getLogger("brainbulge")
 
 #: the parenchyma: where axons are and tissue extremes are taken
 PARENCHYMA = "(gray|white|cerebellum|brainstem)_(left|right)"
+#: ``peak_*`` of the summaries: the value a stretch or strain exceeds in this much tissue (ml)
+PEAK_VOLUME_ML = 0.1
 #: fixed colour ranges of the section figures, so that scenarios compare
 SECTION_RANGES = {
     "|u|": (0.0, 8.0),
@@ -263,7 +266,7 @@ def brain_summary(
         "inputs": dataclasses.asdict(case),
         **solution_summary(
             sol, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
-            tissue=PARENCHYMA, fibres=fibres,
+            tissue=PARENCHYMA, fibres=fibres, peak_volume=PEAK_VOLUME_ML * 1000.0,
         ),
     }
     # the report's name for the CSF strain (None when the mesh has no CSF)
