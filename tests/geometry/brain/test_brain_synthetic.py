@@ -248,6 +248,9 @@ def test_refined_mesh_is_nested_in_the_netgen_mesh(coarse_and_refined) -> None:
     coarse, fine = coarse_and_refined
     assert len(fine.tets) == 8 * len(coarse.tets)
     assert np.array_equal(fine.nodes_mm[: len(coarse.nodes_mm)], coarse.nodes_mm)
+    # tissues tagged and fitted on the Netgen mesh: each child keeps its parent's (children
+    # come in blocks of eight), so the interfaces are the Netgen mesh's
+    assert np.array_equal(fine.tissue.reshape(-1, 8), np.repeat(coarse.tissue[:, None], 8, 1))
     assert fine.quality()["inverted_tets"] == 0
     skull = fine.skull(None)
     new_surface = np.setdiff1d(np.unique(fine.faces), np.arange(len(coarse.nodes_mm)))
