@@ -31,13 +31,11 @@ def refined_family_member(bm, times: int):
     """``bm`` refined uniformly ``times`` times, children keep their parents' tissue, side;
     flaps re-tagged on the new surface (which is the old one: midpoints stay)."""
     from brainbulge.geometry.brain.boundaries import boundary_faces
-    from brainbulge.geometry.brain.brain_mesh import BrainMesh
-    from brainbulge.geometry.brain.refine import refine_uniformly
+    from brainbulge.geometry.brain.brain_mesh import BrainMesh, refined_on_envelope
 
-    nodes, tets, tissue, side = bm.nodes_mm, bm.tets, bm.tissue, bm.side
-    for _ in range(times):
-        nodes, tets, parent, _ = refine_uniformly(nodes, tets)
-        tissue, side = tissue[parent], side[parent]
+    nodes, tets, parent = refined_on_envelope(bm.nodes_mm, bm.tets, bm.envelope, times,
+                                              move=False)
+    tissue, side = bm.tissue[parent], bm.side[parent]
     faces, face_tet = boundary_faces(tets)
     base = nodes[faces][:, :, 2].mean(axis=1) < bm.base_z_mm
     out = BrainMesh(nodes, tets, tissue, side, faces, face_tet, base, bm.base_z_mm,
