@@ -1,5 +1,5 @@
 """``brainbulge reproduce``'s 3D part: the six scenarios on one shared mesh of the paper's
-1108 ml brain (and, from 400k tets on, one shared coarse mesh for mesh sequencing)."""
+1108 ml brain (and one shared coarse mesh when mesh sequencing is asked for)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import pytest
 
 from brainbulge.cli import main as cli_main
 from brainbulge.cli import reproduce
-from brainbulge.geometry.brain.defaults import COARSE_TETS
 from brainbulge.studies.craniectomy import attach_study_meshes, case_from_dict
 
 
@@ -30,17 +29,23 @@ def _spec(common: dict) -> dict:
     return spec
 
 
-@pytest.mark.parametrize("tets", [30_000, reproduce.PAPER_TETS])
-def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tets) -> None:
+@pytest.mark.parametrize(("tets", "coarse_tets"), [(30_000, None),
+                                                   (reproduce.PAPER_TETS, None),
+                                                   (reproduce.PAPER_TETS, 100_000)])
+def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tets,
+                                                                   coarse_tets) -> None:
     """The geometry options (brain volume, refinement, coarse size) build the shared meshes
-    and are then dropped: the scenarios on the meshes pass validation."""
+    and are then dropped: the scenarios on the meshes pass validation. The paper's size is
+    refined and ramped without a coarse mesh unless one is asked for."""
     args = argparse.Namespace(tets=tets, fix="inferior+superior", mesh_size=0.05, scheduler=None)
     brain = reproduce.plan(args)["craniectomy"]
     assert len(brain) == 6 and all(sc["brain_volume_ml"] == 1108.0 for sc in brain)
+    assert all(sc.get("coarse_tets") is None for sc in brain)
+    brain = [{**sc, "coarse_tets": coarse_tets} for sc in brain]
     common = brain[0]
+    assert common.get("refine", 0) == (1 if tets >= reproduce.LARGE_TETS else 0)
     _fake_mesh(tmp_path / "mesh", _spec(common))
-    if tets >= reproduce.LARGE_TETS:
-        assert common["refine"] == 1 and common["coarse_tets"] == COARSE_TETS
+    if coarse_tets:
         _fake_mesh(tmp_path / "coarse-mesh",
                    _spec({**common, "tets": common["coarse_tets"], "refine": 0}))
     attached = attach_study_meshes(tmp_path, brain)
@@ -48,7 +53,7 @@ def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tet
         case = case_from_dict({k: v for k, v in sc.items() if k != "name"})
         assert case.mesh == str(tmp_path / "mesh" / "brain.npz")
         assert case.brain_volume_ml is None and case.fix == "inferior+superior"
-        assert (case.coarse_mesh is not None) == (tets >= reproduce.LARGE_TETS)
+        assert (case.coarse_mesh is not None) == bool(coarse_tets)
 
 
 @pytest.mark.slow

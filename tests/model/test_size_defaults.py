@@ -9,7 +9,6 @@ import pytest
 from brainbulge.cli import build_parser
 from brainbulge.cli.brain import config_from_args
 from brainbulge.errors import InputError
-from brainbulge.geometry.brain.defaults import COARSE_TETS
 from brainbulge.model.brain import (
     LARGE_TETS,
     CraniectomyCase,
@@ -25,13 +24,13 @@ def test_small_meshes_keep_one_netgen_mesh_and_pardiso(tets) -> None:
 
 
 @pytest.mark.parametrize("tets", [LARGE_TETS, 1_400_000, 3_000_000])
-def test_large_meshes_refine_once_sequence_from_a_coarse_mesh_with_krylov(tets) -> None:
-    assert size_defaults(tets) == (1, COARSE_TETS, "krylov")
+def test_large_meshes_refine_once_and_ramp_with_krylov(tets) -> None:
+    assert size_defaults(tets) == (1, None, "krylov")
 
 
 def test_explicit_options_win() -> None:
-    assert size_defaults(1_400_000, linear_solver="pardiso") == (1, COARSE_TETS, "pardiso")
-    assert size_defaults(1_400_000, refine=2) == (2, COARSE_TETS, "krylov")
+    assert size_defaults(1_400_000, linear_solver="pardiso") == (1, None, "pardiso")
+    assert size_defaults(1_400_000, refine=2) == (2, None, "krylov")
     assert size_defaults(1_400_000, coarse_tets=175_000) == (1, 175_000, "krylov")  # nested
     assert size_defaults(1_400_000, refine=0) == (0, None, "krylov")  # nothing to nest in
     assert size_defaults(1_400_000, coarse_tets=100_000) == (1, 100_000, "krylov")
@@ -40,14 +39,13 @@ def test_explicit_options_win() -> None:
     assert size_defaults(100_000, coarse_tets=30_000) == (0, 30_000, "pardiso")
 
 
-def test_a_given_mesh_or_taylor_hood_is_not_sequenced_unasked() -> None:
+def test_a_given_mesh_is_not_refined_unasked() -> None:
     assert size_defaults(1_400_000, mesh_given=True) == (0, None, "pardiso")
-    assert size_defaults(1_400_000, element="taylor-hood") == (1, None, "krylov")
 
 
 def test_the_case_resolves_its_defaults_and_knows_its_nested_coarse_mesh() -> None:
     large = CraniectomyCase(tets=1_400_000)
-    assert (large.refine, large.coarse_tets, large.linear_solver) == (1, COARSE_TETS, "krylov")
+    assert (large.refine, large.coarse_tets, large.linear_solver) == (1, None, "krylov")
     assert not large.nested_coarse
     assert CraniectomyCase(tets=1_400_000, coarse_tets=175_000).nested_coarse
     small = CraniectomyCase(tets=30_000)
@@ -74,7 +72,7 @@ def test_the_command_line_passes_only_what_the_user_gave() -> None:
     cfg = config_from_args(parse(["brain", "--tets", "1400000", "--out", "x"]))
     assert (cfg["refine"], cfg["coarse_tets"], cfg["linear_solver"]) == (None, None, None)
     case = CraniectomyCase(**{k: v for k, v in cfg.items() if v is not None})
-    assert (case.refine, case.coarse_tets, case.linear_solver) == (1, COARSE_TETS, "krylov")
+    assert (case.refine, case.coarse_tets, case.linear_solver) == (1, None, "krylov")
     cfg = config_from_args(parse(["brain", "--tets", "1400000", "--linear-solver", "pardiso",
                                   "--refine", "0", "--out", "x"]))
     case = CraniectomyCase(**{k: v for k, v in cfg.items() if v is not None})
@@ -83,6 +81,6 @@ def test_the_command_line_passes_only_what_the_user_gave() -> None:
 
 def test_a_study_takes_the_defaults_of_its_size() -> None:
     sc = with_size_defaults({"tets": 1_400_000, "flap": "left"})
-    assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (1, COARSE_TETS, "krylov")
+    assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (1, None, "krylov")
     sc = with_size_defaults({"tets": 1_400_000, "linear_solver": "pardiso", "refine": 0})
     assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (0, None, "pardiso")

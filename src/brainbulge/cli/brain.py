@@ -22,7 +22,6 @@ from brainbulge.cli import (
     start_run,
 )
 from brainbulge.geometry.brain.defaults import (
-    COARSE_TETS,
     EDGE_RADIUS_MM,
     FIXATIONS,
     LARGE_TETS,
@@ -69,8 +68,8 @@ def add_parser(sub: Any) -> None:
                    f"from {LARGE_TETS:,} tets)")
     p.add_argument("--coarse-tets", type=int, default=None,
                    help="mesh sequencing: solve first on a mesh of about this many tets, then "
-                   "finish on the fine mesh from its solution (MINI; 0: none; default from "
-                   f"{LARGE_TETS:,} tets: {COARSE_TETS:,}, a separate mesh)")
+                   "finish on the fine mesh from its solution (MINI; default: none, the load is "
+                   "ramped on the mesh itself)")
     p.add_argument("--refine", type=int, default=None,
                    help="mesh at tets / 8^K and refine it uniformly K times (0-3); with "
                    "--coarse-tets tets / 8^K the sequencing meshes are nested (default: 1 "

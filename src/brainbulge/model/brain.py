@@ -25,7 +25,6 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.brain import BrainMesh, to_ngsolve
 from brainbulge.geometry.brain.boundaries import UNILATERAL_DIAMETER_MM, SuperiorBand
 from brainbulge.geometry.brain.defaults import (
-    COARSE_TETS,
     FIXATIONS,
     LARGE_TETS,
     SUPERIOR_ELEVATION_DEG,
@@ -41,25 +40,25 @@ SWELL_SIDES = {"both": ("left", "right"), "left": ("left",), "right": ("right",)
 
 
 def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None = None,
-                  linear_solver: str | None = None, element: str = "mini",
+                  linear_solver: str | None = None,
                   mesh_given: bool = False) -> tuple[int, int | None, str]:
     """``(refine, coarse_tets, linear_solver)`` for a mesh of about ``tets`` tets; each
     argument given (not None) is kept as it is.
 
-    From :data:`LARGE_TETS` up: Netgen at ``tets / 8``, refined once (``refine = 1``), mesh
-    sequencing from a separate Netgen mesh of :data:`COARSE_TETS` tets (the nested, unrefined
-    mesh, ``coarse_tets = tets // 8**refine``, is used when asked for: from its state the fine
-    stage stalled at 1.40M tets) and GMRES with AMG blocks (``krylov``); below it: one Netgen mesh,
-    no sequencing, PARDISO. ``coarse_tets = 0`` turns sequencing off. A mesh read from a
-    file (``mesh_given``) is not refined or sequenced unless asked; sequencing needs MINI.
+    From :data:`LARGE_TETS` up: Netgen at ``tets / 8``, refined once (``refine = 1``), the
+    load ramped on the fine mesh and GMRES with AMG blocks (``krylov``); below it: one
+    Netgen mesh, PARDISO. Mesh sequencing (``coarse_tets``) only when asked for: on the
+    1.40M-tet template the fine stage did not converge from a coarse state (from a separate
+    100k-tet mesh, nor from the nested 175k one) and then ramped anyway, so sequencing cost
+    38.7 minutes and 17.4 GB against the ramp's 17 minutes and 12.5 GB (docs/performance.md).
+    ``coarse_tets = 0`` is the same as None. A mesh read from a file (``mesh_given``) is not
+    refined unless asked.
     """
     large = tets >= LARGE_TETS and not mesh_given
     if refine is None:
         refine = 1 if large else 0
     if linear_solver is None:
         linear_solver = "krylov" if large else "pardiso"
-    if coarse_tets is None and large and refine > 0 and element == "mini":
-        coarse_tets = COARSE_TETS
     return refine, coarse_tets or None, linear_solver
 
 
@@ -165,11 +164,8 @@ class CraniectomyCase:
             raise InputError(f"swelling Js = {self.swelling!r} must lie in [0.5, 2] (paper: 1.1)")
         if not (isinstance(self.tets, int) and 1_000 <= self.tets <= 5_000_000):
             raise InputError(f"tets = {self.tets!r} must be a whole number in [1000, 5000000]")
-        coarse = self.coarse_tets
-        if self.coarse_mesh is not None and coarse is None:
-            coarse = 0  # the coarse mesh is given: no coarse size of the defaults' own
         self.refine, self.coarse_tets, self.linear_solver = size_defaults(
-            self.tets, self.refine, coarse, self.linear_solver, self.element,
+            self.tets, self.refine, self.coarse_tets, self.linear_solver,
             self.mesh is not None)
         if self.linear_solver not in ("pardiso", "krylov"):
             raise InputError(f"linear solver {self.linear_solver!r}: choose pardiso or krylov")

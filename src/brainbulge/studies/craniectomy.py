@@ -416,11 +416,9 @@ def attach_study_meshes(out_dir: Path, scenarios: list[dict[str, Any]]) -> list[
 def with_size_defaults(scenario: dict[str, Any]) -> dict[str, Any]:
     """``scenario`` with ``refine``, ``coarse_tets`` and ``linear_solver`` of its size
     (:func:`~brainbulge.model.brain.size_defaults`) where it does not give them."""
-    coarse = scenario.get("coarse_tets")
     refine, coarse, solver = size_defaults(
         scenario.get("tets", CraniectomyCase.tets), scenario.get("refine"),
-        0 if coarse is None and scenario.get("coarse_mesh") else coarse,
-        scenario.get("linear_solver"), scenario.get("element", "mini"))
+        scenario.get("coarse_tets"), scenario.get("linear_solver"))
     return {**scenario, "refine": refine, "coarse_tets": coarse, "linear_solver": solver}
 
 

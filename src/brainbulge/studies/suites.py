@@ -147,7 +147,7 @@ def paper_brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, 
 
     common: dict[str, Any] = {"tets": tets, "brain_volume_ml": PAPER_BRAIN_VOLUME_ML,
                               "steps": 4, "fix": fix}
-    if tets >= LARGE_TETS:  # a refined mesh, sequencing from a coarse mesh, Krylov
+    if tets >= LARGE_TETS:  # a refined mesh, Krylov
         refine, coarse_tets, solver = size_defaults(tets)
         common.update(refine=refine, coarse_tets=coarse_tets, linear_solver=solver)
     return common

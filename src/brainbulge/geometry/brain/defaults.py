@@ -25,11 +25,3 @@ SUPERIOR_ELEVATION_DEG = 0.0
 #: (:func:`brainbulge.model.brain.size_defaults`): below it PARDISO on one Netgen mesh is
 #: quicker and lighter
 LARGE_TETS = 400_000
-
-#: the coarse level of mesh sequencing for a large mesh, by default: a separate Netgen mesh of
-#: this many tets. On the 1.40M-tet template (left flap, both sides) it finished in 7 min 51 s;
-#: the unrefined, nested mesh of the refinement (175k tets) converged on its own but the fine
-#: stage from its state stalled (GMRES at 2e-3 after 1000 iterations; with the fine mesh's
-#: labels inherited from it, 12 Newton iterations in 65 min without converging): pass
-#: ``coarse_tets = tets / 8**refine`` to use it anyway
-COARSE_TETS = 100_000
