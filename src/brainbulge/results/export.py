@@ -45,9 +45,11 @@ def vertex_fields(
     centre: np.ndarray,
     extra: dict[str, ngs.CoefficientFunction] | None = None,
     fibres: Callable[[np.ndarray], np.ndarray] | None = None,
+    gradient: ngs.CoefficientFunction | None = None,
 ) -> VertexFields:
     """Evaluate the outputs of MODEL.md section 3 at the vertices of every element
-    (``fibres(X)``: unit axon directions replacing the radial default)."""
+    (``fibres(X)``: unit axon directions replacing the radial default; ``gradient``: the
+    state's recovered gradient when the caller has it, else computed here)."""
     mesh = form.mesh
     dim = mesh.dim
     points = vertex_coordinates(mesh)
@@ -55,7 +57,9 @@ def vertex_fields(
     names = list(mesh.GetMaterials())
 
     mips = element_corners(mesh)
-    s = sample(form, mips, gradient=recovered_gradient(mesh, form.output_displacement()))
+    if gradient is None:
+        gradient = recovered_gradient(mesh, form.output_displacement())
+    s = sample(form, mips, gradient=gradient)
     fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
     for name, cf in (extra or {}).items():
         fields[name] = np.asarray(cf(mips)).reshape(len(s.X), -1).squeeze()

@@ -25,6 +25,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 
+import ngsolve as ngs
 import numpy as np
 
 from brainbulge.results.fields import output_fields, sample
@@ -203,12 +204,14 @@ CHUNK = 1_000_000
 
 
 def _sampled_scalars(form, points, centre: np.ndarray,
-                     fibres: Callable[[np.ndarray], np.ndarray] | None
+                     fibres: Callable[[np.ndarray], np.ndarray] | None,
+                     G: ngs.CoefficientFunction | None = None,
                      ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Reference coordinates ``X``, swelling ``Js`` and the scalar output fields at
     ``points``, evaluated ``CHUNK`` points at a time, stretches and strains from the
-    recovered gradient."""
-    G = recovered_gradient(form.mesh, form.output_displacement())
+    recovered gradient ``G`` (computed here when not given)."""
+    if G is None:
+        G = recovered_gradient(form.mesh, form.output_displacement())
     parts = []
     for a in range(0, len(points), CHUNK):
         s = sample(form, points[a:a + CHUNK], gradient=G)
@@ -228,6 +231,7 @@ def solution_summary(
     tissue: str | None = None,
     fibres: Callable[[np.ndarray], np.ndarray] | None = None,
     peak_volume: float | None = None,
+    gradient: ngs.CoefficientFunction | None = None,
 ) -> dict[str, object]:
     """The summary of MODEL.md section 3 keys for any converged or partial solution.
 
@@ -237,11 +241,12 @@ def solution_summary(
     the others (an ultrasoft CSF filler) are reported with the prefix ``csf_``.
     ``fibres(X)`` gives unit axon directions at reference points (default: radial).
     ``peak_volume``: also ``peak_*``, the values exceeded in that volume
-    (:func:`field_percentiles`).
+    (:func:`field_percentiles`). ``gradient``: the state's recovered gradient, when the
+    caller has it already (:func:`~brainbulge.results.recovery.recovered_gradient`).
     """
     form = sol.form
     q = quadrature_points(form.mesh, order=4)
-    X, Js, fields = _sampled_scalars(form, q.points, centre, fibres)
+    X, Js, fields = _sampled_scalars(form, q.points, centre, fibres, gradient)
     keep = away_from(X, singular_points, edge_exclusion)
     if near_singular is not None:
         for a in range(0, len(X), CHUNK):  # (a skull distance: several arrays per point)

@@ -64,6 +64,7 @@ from brainbulge.results.export import (
     vertex_fields,
     write_vtu,
 )
+from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_write_json, atomic_write_text
 from brainbulge.results.sections import plot_sections
 from brainbulge.results.summary import solution_summary
@@ -196,11 +197,12 @@ def write_brain_outputs(run: BrainRun, out_dir: Path,
     case, bm, form, sol = run.case, run.bm, run.form, run.sol
     out_dir = Path(out_dir)
     fibres = _fibres(case, bm)
-    summary = brain_summary(case, bm, sol, fibres)
+    G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for both
+    summary = brain_summary(case, bm, sol, fibres, G)
     summary["mesh_sequencing"] = (None if run.sequenced is None
                                   else dataclasses.asdict(run.sequenced))
     summary.update(extra or {})
-    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres)
+    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
@@ -245,8 +247,10 @@ def brain_summary(
     bm: BrainMesh,
     sol: Solution,
     fibres=None,
+    gradient=None,
 ) -> dict[str, Any]:
-    """``summary.json`` of a 3D scenario (see the module docstring)."""
+    """``summary.json`` of a 3D scenario (see the module docstring); ``gradient``: the
+    state's recovered gradient, if the caller has it."""
     form = sol.form
     skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
     flap = bm.flaps[case.flap]
@@ -267,6 +271,7 @@ def brain_summary(
         **solution_summary(
             sol, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
             tissue=PARENCHYMA, fibres=fibres, peak_volume=PEAK_VOLUME_ML * 1000.0,
+            gradient=gradient,
         ),
     }
     # the report's name for the CSF strain (None when the mesh has no CSF)
