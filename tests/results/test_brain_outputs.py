@@ -83,8 +83,8 @@ def test_constraint_statistics_of_je() -> None:
     Js = np.full(100, 1.1)
     dev = np.linspace(0.0, 0.099, 100)  # |Je - 1| = 0, 0.001, ..., 0.099
     J = Js * (1 + dev * np.where(np.arange(100) % 2, 1, -1))
-    regions = np.where(np.arange(100) < 50, "white_left", "gray_left")
-    st = constraint_statistics(J, Js, np.ones(100), regions)
+    regions = np.where(np.arange(100) < 50, 1, 0)  # indices into the names
+    st = constraint_statistics(J, Js, np.ones(100), regions, ["gray_left", "white_left"])
     assert st["median_abs_Je_minus_1"] == pytest.approx(0.049)
     assert st["p95_abs_Je_minus_1"] == pytest.approx(0.094)
     assert st["raw_max_abs_Je_minus_1"] == pytest.approx(0.099)
