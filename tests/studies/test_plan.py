@@ -287,3 +287,37 @@ def test_the_command_end_to_end(toy, tmp_path, capsys) -> None:
     assert "recommended flap: c00-d" in capsys.readouterr().out
     assert main(argv) == 0  # resumes
     assert json.loads((out / "status.json").read_text())["status"] == "complete"
+
+
+def test_a_start_whose_krylov_solve_fails_ramps_at_once(plan, tmp_path, monkeypatch) -> None:
+    """A start state whose first GMRES solve fails is given up after that one solve (a
+    tighter retry with a fresh preconditioner cost 150 s at 111k tets): the load ramps."""
+    import dataclasses
+
+    from brainbulge.errors import ConvergenceError
+    from brainbulge.solver.linear.krylov import BlockKrylovSolver
+    from brainbulge.studies import craniectomy
+    from brainbulge.studies.plan import STATE_FILE, _state_key, load_state
+
+    out, cases, _ = plan
+    case = dataclasses.replace(cases[1], linear_solver="krylov")
+    bm = _fresh_mesh(case)
+    calls = []
+    solve = BlockKrylovSolver.solve
+
+    def failing_first(self, *args, **kwargs):
+        calls.append((id(self), self.maxiter))
+        if len(calls) == 1:
+            raise ConvergenceError("GMRES stalled (test)")
+        return solve(self, *args, **kwargs)
+
+    monkeypatch.setattr(BlockKrylovSolver, "solve", failing_first)
+
+    def start(form) -> bool:
+        source = out / cases[0].name / STATE_FILE
+        return load_state(form, source, _state_key(cases[0], bm))
+
+    run = craniectomy.solve_brain(case, tmp_path, brain_mesh=bm, start=start)
+    assert calls[0][1] == craniectomy.START_KRYLOV_ITERATIONS
+    assert calls[1][0] != calls[0][0]  # the next solve is the ramp's, not a retry
+    assert run.started is False and run.sol.converged

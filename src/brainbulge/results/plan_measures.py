@@ -31,15 +31,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brainbulge.results.fields import output_fields, sample
 from brainbulge.results.plan_defaults import RIM_BAND_MM, STRAIN_THRESHOLD
-from brainbulge.results.quadrature import quadrature_points
-from brainbulge.results.recovery import recovered_gradient
-from brainbulge.results.summary import CHUNK, weighted_percentiles
+from brainbulge.results.summary import CHUNK, PointFields, weighted_percentiles
 
 if TYPE_CHECKING:
     from brainbulge.geometry.brain import Flap, RigidSkull
-    from brainbulge.solver.mixed import MixedForm
 
 MM3_PER_ML = 1000.0
 
@@ -57,36 +53,29 @@ def rim_distance_mm(X: np.ndarray, flap: Flap, skull: RigidSkull, beyond: float)
 
 
 def damage_measures(
-    form: MixedForm,
-    centre_mm: np.ndarray,
+    points: PointFields,
     flap: Flap,
     skull: RigidSkull,
     parenchyma: str,
     threshold: float = STRAIN_THRESHOLD,
     rim_band_mm: tuple[float, float] = RIM_BAND_MM,
-    fibres=None,
 ) -> dict[str, float | None]:
-    """The measures of the module docstring for the solved ``form`` (``parenchyma``: regex of
-    the parenchyma's region names; ``centre_mm`` and ``fibres`` as for the summary's
-    ``lambda_t``)."""
+    """The measures of the module docstring from the solved state's fields at the summary's
+    integration points (:func:`~brainbulge.results.summary.point_fields`); ``parenchyma``:
+    regex of the parenchyma's region names."""
     if not 0 < threshold < 10:
         raise ValueError(f"strain threshold {threshold!r} must lie in (0, 10)")
     lo, hi = rim_band_mm
-    q = quadrature_points(form.mesh, order=4)
+    q = points.q
     rx = re.compile(f"^(?:{parenchyma})$")
-    regions = set(form.mesh.GetMaterials())
-    in_par = q(form.mesh.MaterialCF({r: 1.0 for r in regions if rx.match(r)},
-                                    default=0.0)) > 0.5
-    G = recovered_gradient(form.mesh, form.output_displacement())
-    strain = np.empty(len(q.X))
-    stretch_t = np.empty(len(q.X))
-    rim = np.zeros(len(q.X), dtype=bool)
-    for a in range(0, len(q.X), CHUNK):
-        s = sample(form, q.points[a:a + CHUNK], gradient=G)
-        f = output_fields(s, centre_mm, None if fibres is None else fibres(s.X))
-        strain[a:a + CHUNK] = f["max_principal_strain"]
-        stretch_t[a:a + CHUNK] = f["lambda_t"]
-        r = rim_distance_mm(s.X, flap, skull, beyond=hi)
+    regions = set(q.mesh.GetMaterials())
+    in_par = q(q.mesh.MaterialCF({r: 1.0 for r in regions if rx.match(r)},
+                                 default=0.0)) > 0.5
+    strain = points.fields["max_principal_strain"]
+    stretch_t = points.fields["lambda_t"]
+    rim = np.zeros(len(points.X), dtype=bool)
+    for a in range(0, len(points.X), CHUNK):
+        r = rim_distance_mm(points.X[a:a + CHUNK], flap, skull, beyond=hi)
         rim[a:a + CHUNK] = (r >= lo) & (r <= hi)
     w = q.weights
     rim &= in_par

@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import ngsolve as ngs
 import numpy as np
 
 from brainbulge.results.fields import output_fields, sample
-from brainbulge.results.quadrature import quadrature_points
+from brainbulge.results.quadrature import QuadraturePoints, quadrature_points
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.solver.options import Solution
 
@@ -209,23 +210,44 @@ def constraint_statistics(J: np.ndarray, Js: np.ndarray, weights: np.ndarray,
 CHUNK = 1_000_000
 
 
-def _sampled_scalars(form, points, centre: np.ndarray,
-                     fibres: Callable[[np.ndarray], np.ndarray] | None,
-                     G: ngs.CoefficientFunction | None = None,
-                     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """Reference coordinates ``X``, swelling ``Js`` and the scalar output fields at
-    ``points``, evaluated ``CHUNK`` points at a time, stretches and strains from the
-    recovered gradient ``G`` (computed here when not given)."""
-    if G is None:
-        G = recovered_gradient(form.mesh, form.output_displacement())
+@dataclass
+class PointFields:
+    """The scalar output fields at all order-4 integration points of a solution, the
+    points of every percentile and extreme of the summary (and of a plan's damage measures,
+    :mod:`brainbulge.results.plan_measures`), sampled once.
+
+    ``q``: the points and their reference volumes ``q.weights``; ``X`` their reference
+    coordinates, ``Js`` the swelling there, ``fields`` the 1D fields of
+    :func:`~brainbulge.results.fields.output_fields` (stretches and strains from the
+    recovered gradient, ``J`` the solution's own).
+    """
+
+    q: QuadraturePoints
+    X: np.ndarray
+    Js: np.ndarray
+    fields: dict[str, np.ndarray]
+
+
+def point_fields(form, centre: np.ndarray,
+                 fibres: Callable[[np.ndarray], np.ndarray] | None = None,
+                 gradient: ngs.CoefficientFunction | None = None) -> PointFields:
+    """:class:`PointFields` of ``form``'s state, evaluated ``CHUNK`` points at a time, with
+    the recovered gradient ``gradient`` (computed here when not given), ``centre`` and
+    ``fibres`` as for :func:`~brainbulge.results.fields.output_fields`."""
+    q = quadrature_points(form.mesh, order=4)
+    G = gradient if gradient is not None else recovered_gradient(
+        form.mesh, form.output_displacement())
     parts = []
-    for a in range(0, len(points), CHUNK):
-        s = sample(form, points[a:a + CHUNK], gradient=G)
+    for a in range(0, len(q.X), CHUNK):
+        s = sample(form, q.points[a:a + CHUNK], gradient=G)
         f = output_fields(s, centre, None if fibres is None else fibres(s.X))
         parts.append((s.X, s.Js, {k: v for k, v in f.items() if v.ndim == 1}))
-    X = np.concatenate([part[0] for part in parts])
-    Js = np.concatenate([part[1] for part in parts])
-    return X, Js, {k: np.concatenate([part[2][k] for part in parts]) for k in parts[0][2]}
+    return PointFields(
+        q=q,
+        X=np.concatenate([part[0] for part in parts]),
+        Js=np.concatenate([part[1] for part in parts]),
+        fields={k: np.concatenate([part[2][k] for part in parts]) for k in parts[0][2]},
+    )
 
 
 def solution_summary(
@@ -237,7 +259,7 @@ def solution_summary(
     tissue: str | None = None,
     fibres: Callable[[np.ndarray], np.ndarray] | None = None,
     peak_volume: float | None = None,
-    gradient: ngs.CoefficientFunction | None = None,
+    points: PointFields | None = None,
 ) -> dict[str, object]:
     """The summary of MODEL.md section 3 keys for any converged or partial solution.
 
@@ -247,12 +269,13 @@ def solution_summary(
     the others (an ultrasoft CSF filler) are reported with the prefix ``csf_``.
     ``fibres(X)`` gives unit axon directions at reference points (default: radial).
     ``peak_volume``: also ``peak_*``, the values exceeded in that volume
-    (:func:`field_percentiles`). ``gradient``: the state's recovered gradient, when the
-    caller has it already (:func:`~brainbulge.results.recovery.recovered_gradient`).
+    (:func:`field_percentiles`). ``points``: the state's :func:`point_fields`, when the
+    caller has them already (``fibres`` and ``centre`` then are theirs).
     """
     form = sol.form
-    q = quadrature_points(form.mesh, order=4)
-    X, Js, fields = _sampled_scalars(form, q.points, centre, fibres, gradient)
+    if points is None:
+        points = point_fields(form, centre, fibres)
+    q, X, Js, fields = points.q, points.X, points.Js, points.fields
     keep = away_from(X, singular_points, edge_exclusion)
     if near_singular is not None:
         for a in range(0, len(X), CHUNK):  # (a skull distance: several arrays per point)

@@ -64,6 +64,10 @@ class NewtonSolver(MixedEquations):
         #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
         #: after ``k`` iterations gives up (None: no such requirement)
         self.required_progress: tuple[int, float] | None = None
+        #: a failed Krylov solve is retried once, tighter, with a fresh preconditioner
+        #: (False: the Newton solve fails at once, e.g. from a start state that a ramp can
+        #: replace)
+        self.retry_linear = True
         self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
         self.relaxation = (HotspotRelaxation(self) if HotspotRelaxation.applies(form)
                            else None)
@@ -159,7 +163,7 @@ class NewtonSolver(MixedEquations):
                         K_x = self.tangent(x)
                     dx, dlams = self.newton_direction(x, K_x, self.last_linear_solution)
                 except ConvergenceError:
-                    if not self.inexact or self.eta <= ETA_MIN:
+                    if not self.inexact or self.eta <= ETA_MIN or not self.retry_linear:
                         return False, it, norm
                     # a failed Krylov solve has asked for a fresh AMG: retry it, tighter
                     log.debug("    Krylov solve failed: retrying with a fresh preconditioner")

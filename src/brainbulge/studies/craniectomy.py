@@ -39,6 +39,7 @@ import functools
 import hashlib
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -67,7 +68,7 @@ from brainbulge.results.export import (
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_write_json, atomic_write_text
 from brainbulge.results.sections import plot_sections
-from brainbulge.results.summary import solution_summary
+from brainbulge.results.summary import PointFields, point_fields, solution_summary
 from brainbulge.results.views3d import write_surface_views
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.ramp import equilibrate
@@ -171,6 +172,9 @@ def solve_brain(
         if start is not None and not restart.is_file() and start(form):
             solver = NewtonSolver(form, dataclasses.replace(
                 options, max_iterations=START_MAX_ITERATIONS))
+            if solver.inexact:  # a start whose tangent GMRES cannot solve: ramp at once
+                solver.retry_linear = False
+                solver.linear.maxiter = START_KRYLOV_ITERATIONS
             sol = equilibrate(solver, curvature_below=np.inf)
             started = sol.converged
             if not sol.converged:
@@ -189,19 +193,28 @@ def solve_brain(
     return BrainRun(case, bm, form, sol, sequenced, started)
 
 
-def write_brain_outputs(run: BrainRun, out_dir: Path,
-                        extra: dict[str, Any] | None = None) -> dict[str, Any]:
+def write_brain_outputs(
+    run: BrainRun,
+    out_dir: Path,
+    extra: dict[str, Any] | None = None,
+    measures: Callable[[PointFields], dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     """Write the files of a solved scenario into ``out_dir`` (``summary.json`` last, with
-    ``extra`` keys added); return the summary; raise :class:`ConvergenceError` if it
+    ``extra`` keys added, and those of ``measures`` of the summary's sampled fields, e.g. a
+    plan's damage measures); return the summary; raise :class:`ConvergenceError` if it
     stopped before full load."""
     case, bm, form, sol = run.case, run.bm, run.form, run.sol
     out_dir = Path(out_dir)
     fibres = _fibres(case, bm)
-    G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for both
-    summary = brain_summary(case, bm, sol, fibres, G)
+    G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for all
+    points = point_fields(form, bm.envelope.centre_mm(), fibres, G)
+    summary = brain_summary(case, bm, sol, points)
     summary["mesh_sequencing"] = (None if run.sequenced is None
                                   else dataclasses.asdict(run.sequenced))
     summary.update(extra or {})
+    if measures is not None:
+        summary.update(measures(points))
+    del points  # the outputs' largest arrays, gone before the vertex fields
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
@@ -220,6 +233,13 @@ def write_brain_outputs(run: BrainRun, out_dir: Path,
 #: same from the 100 mm flap's state, with the exact tangent; the modified tangent of mesh
 #: sequencing stalled there), so a start that does not help costs at most a ramp
 START_MAX_ITERATIONS = 8
+
+#: GMRES iterations of one linear solve from a start state before the load is ramped instead.
+#: A larger flap's start from the smaller one's state frees the tissue under the newly opened
+#: ring at full pressure: on the 111k-tet template (80 -> 100 mm) GMRES stood at a relative
+#: residual of 6e-3 after 1,000 iterations, twice (with a fresh preconditioner), 150 s
+#: before the ramp; converging solves there take <= ~170 iterations
+START_KRYLOV_ITERATIONS = 200
 
 
 #: mesh sequencing: largest relative volume difference between the coarse and the fine mesh
@@ -246,11 +266,11 @@ def brain_summary(
     case: CraniectomyCase,
     bm: BrainMesh,
     sol: Solution,
-    fibres=None,
-    gradient=None,
+    points: PointFields | None = None,
 ) -> dict[str, Any]:
-    """``summary.json`` of a 3D scenario (see the module docstring); ``gradient``: the
-    state's recovered gradient, if the caller has it."""
+    """``summary.json`` of a 3D scenario (see the module docstring); ``points``: the
+    state's fields at the integration points (:func:`~brainbulge.results.summary.
+    point_fields`), if the caller has them (default: sampled here, radial axons)."""
     form = sol.form
     skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
     flap = bm.flaps[case.flap]
@@ -270,8 +290,7 @@ def brain_summary(
         "inputs": dataclasses.asdict(case),
         **solution_summary(
             sol, bm.envelope.centre_mm(), [], 0.0, near_singular=near_rim,
-            tissue=PARENCHYMA, fibres=fibres, peak_volume=PEAK_VOLUME_ML * 1000.0,
-            gradient=gradient,
+            tissue=PARENCHYMA, peak_volume=PEAK_VOLUME_ML * 1000.0, points=points,
         ),
     }
     # the report's name for the CSF strain (None when the mesh has no CSF)

@@ -33,7 +33,7 @@ from brainbulge.results.export import (
 from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_output, atomic_write_json
-from brainbulge.results.summary import solution_summary
+from brainbulge.results.summary import point_fields, solution_summary
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
 from brainbulge.studies.runner import stopped_summary
@@ -88,7 +88,8 @@ def run_hemidisk(
         "case": case.name,
         "inputs": dataclasses.asdict(case),
         **solution_summary(
-            sol, centre, geo.singular_points(), case.edge_exclusion * case.R, gradient=G
+            sol, centre, geo.singular_points(), case.edge_exclusion * case.R,
+            points=point_fields(form, centre, gradient=G),
         ),
     }
     summary["rezones"] = sol.rezones

@@ -168,18 +168,18 @@ def plan_task(scenario: dict[str, Any], folder: Path) -> dict[str, Any]:
         return False
 
     run = solve_brain(case, folder, brain_mesh=bm, start=start)
-    extra = damage_measures(run.form, bm.envelope.centre_mm(), bm.flaps["custom"],
-                            bm.skull("custom", case.edge_radius_mm), PARENCHYMA, threshold)
-    extra.update({
+    extra = {
         "centre_on_skull_mm": list(bm.flaps["custom"].centre_mm),
         "flap_diameter_mm": case.flap_diameter_mm,
         "plan_flap_area_cm2": bm.flap_area_cm2("custom"),
         "warm_start_from": used[0] if used else None,
         "warm_start_converged": run.started,
-    })
+    }
     if run.sol.converged:
         save_state(run.form, folder / STATE_FILE, key)
-    summary = write_brain_outputs(run, folder, extra)
+    skull = bm.skull("custom", case.edge_radius_mm)
+    summary = write_brain_outputs(run, folder, extra, measures=lambda points: damage_measures(
+        points, bm.flaps["custom"], skull, PARENCHYMA, threshold))
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 
