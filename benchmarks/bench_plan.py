@@ -6,8 +6,8 @@ builds (or reads) the ICBM152 mesh, places the centres, runs the plan on a local
 (``--workers``) or ``--scheduler serial``, and prints one row per plan (Newton iterations,
 warm start, solve s)
 and the totals: plans run, wall time, time per plan, the recommendation. ``--cold`` runs
-every plan from ``Js = 1`` (no warm starts), for comparison; ``--linear-solver`` overrides the
-product's choice for the mesh's size.
+every plan from ``Js = 1`` (no warm starts), for comparison; ``--linear-solver`` overrides
+``brainbulge plan``'s default (GMRES + AMG).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from brainbulge.results.plan_defaults import LINEAR_SOLVER
 from brainbulge.runtime import configure as configure_runtime
 
 
@@ -32,8 +33,8 @@ def main() -> None:
     ap.add_argument("--scheduler", default=None)
     ap.add_argument("--tolerance", type=float, default=1e-9)
     ap.add_argument("--cold", action="store_true", help="no warm starts")
-    ap.add_argument("--linear-solver", default=None, choices=["pardiso", "krylov"],
-                    help="default: the product's for the mesh's size")
+    ap.add_argument("--linear-solver", default=LINEAR_SOLVER, choices=["pardiso", "krylov"],
+                    help=f"default: {LINEAR_SOLVER}, as `brainbulge plan`")
     ap.add_argument("--edge-radius", type=float, default=None,
                     help="skull edge radius [mm] (default: the product's)")
     ap.add_argument("--out", default=None)

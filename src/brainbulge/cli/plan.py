@@ -27,7 +27,12 @@ MAX_CENTRES = 100
 
 def add_parser(sub: Any) -> None:
     from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
-    from brainbulge.results.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
+    from brainbulge.results.plan_defaults import (
+        DIAMETERS_MM,
+        LINEAR_SOLVER,
+        N_CENTRES,
+        STRAIN_THRESHOLD,
+    )
 
     p = sub.add_parser("plan", help="search the flap's centre and size for the least damage",
                        description=__doc__)
@@ -60,8 +65,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--steps", type=int, default=4, help="initial load steps of a cold start")
     p.add_argument("--tolerance", type=positive_float("--tolerance"), default=1e-9,
                    help="Newton's tolerance at full load (default 1e-9)")
-    p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default="krylov",
-                   help="linear solver (default krylov: GMRES + AMG)")
+    p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default=LINEAR_SOLVER,
+                   help=f"linear solver (default {LINEAR_SOLVER}: GMRES + AMG)")
     p.add_argument("--skull-edge-radius", type=positive_float("--skull-edge-radius"),
                    default=EDGE_RADIUS_MM,
                    help="rounding radius of the skull's cut edge, in the bone outside the "
