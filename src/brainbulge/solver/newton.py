@@ -40,12 +40,6 @@ log = logging.getLogger("brainbulge")
 #: than 5 % (where the load path folds, the 2D alpha 80 / beta 30 runs spent all 20
 #: iterations on 0.1-0.4 % steps, attempt after attempt)
 STAGNATION = 4
-#: an attempt also stops, as failed, when its last this many iterations together lowered
-#: the residual by less than 5 %, whatever their steps (on the 111k-tet template an 80 mm
-#: flap's Newton sat at |R| 1.3e-4, 3.3e-6 and 2.0e-6 for 6-11 iterations of full or
-#: half steps, each attempt running to the 20-iteration limit, twice per load step: ~5 min
-#: per failed step before the step was cut)
-STALL = 4
 #: a Newton solve running longer than this [s] logs each iteration at INFO (else DEBUG), so
 #: that a long fine-mesh solve shows its progress in the log
 SLOW_NEWTON_S = 30.0
@@ -205,12 +199,6 @@ class NewtonSolver(MixedEquations):
                     and norm > 0.95 * norm_before_short):
                 log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
                           norm_before_short)
-                return False, it + 1, norm
-            past = self.history[-1]
-            if (0 < STALL <= len(past) and norm > self.tolerance
-                    and norm > 0.95 * past[-STALL]):
-                log.debug("    stalled: |R| %.3e after %d iterations from %.3e", norm, STALL,
-                          past[-STALL])
                 return False, it + 1, norm
         return False, self.opt.max_iterations, norm
 
