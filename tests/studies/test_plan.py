@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -321,3 +322,33 @@ def test_a_start_whose_krylov_solve_fails_ramps_at_once(plan, tmp_path, monkeypa
     assert calls[0][1] == craniectomy.START_KRYLOV_ITERATIONS
     assert calls[1][0] != calls[0][0]  # the next solve is the ramp's, not a retry
     assert run.started is False and run.sol.converged
+
+
+def test_damage_measures_weigh_the_parenchyma_and_fall_with_the_threshold(plan, tmp_path
+                                                                        ) -> None:
+    """From the summary's sampled fields: the parenchyma volume is the mesh's (the order-4
+    weights integrate a tet exactly), the strained volume falls as the threshold rises, lies
+    within the parenchyma, and at the default threshold is the plan's."""
+    from brainbulge.results.plan_measures import damage_measures
+    from brainbulge.results.summary import point_fields
+    from brainbulge.studies.craniectomy import PARENCHYMA, solve_brain
+    from brainbulge.studies.plan import STATE_FILE, _state_key, load_state
+
+    out, cases, rows = plan
+    case = cases[1]
+    bm = _fresh_mesh(case)
+    run = solve_brain(case, tmp_path, brain_mesh=bm, start=lambda form: load_state(
+        form, out / case.name / STATE_FILE, _state_key(case, bm)))
+    assert run.started and run.sol.newton_iterations <= 1
+    points = point_fields(run.form, bm.envelope.centre_mm())
+    flap, skull = bm.flaps["custom"], bm.skull("custom", case.edge_radius_mm)
+    by = {t: damage_measures(points, flap, skull, PARENCHYMA, t) for t in (0.02, 0.08, 0.18)}
+    parenchyma = sum(v for k, v in bm.region_volumes_ml().items()
+                     if re.fullmatch(PARENCHYMA, k))
+    assert by[0.18]["parenchyma_volume_ml"] == pytest.approx(parenchyma, rel=1e-9)
+    strained = [by[t]["strained_volume_ml"] for t in (0.02, 0.08, 0.18)]
+    assert parenchyma >= strained[0] >= strained[1] >= strained[2] >= 0
+    assert strained[0] > strained[2]  # the threshold matters on this state
+    assert 0 < by[0.18]["rim_volume_ml"] < parenchyma
+    assert by[0.18]["strained_volume_ml"] == pytest.approx(
+        rows[case.name]["strained_volume_ml"], rel=1e-6, abs=1e-9)
