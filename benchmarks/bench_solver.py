@@ -1,4 +1,4 @@
-"""Solver benchmark: the 3D swelling inclusion (MODEL.md section 7) at three mesh sizes.
+"""Solver benchmark: the 3D swelling inclusion (docs/model.md section 8) at three mesh sizes.
 
 Prints elements, DOFs, assembly s/iteration, linear solve s/iteration, Newton iterations,
 peak memory and the radial-map error. Rerun with ``python benchmarks/bench_solver.py``
@@ -44,7 +44,7 @@ def run(h: float, element: str) -> dict:
     r = np.linalg.norm(R * d + u)
     exact = (R**3 + (JS - 1) * A**3) ** (1 / 3)
     # the whole field: an incompressible radial map is fixed by the volume it must add,
-    # r^3 = R^3 + (Js - 1) A^3 outside the inclusion, r = Js^(1/3) R inside (MODEL.md s. 7)
+    # r^3 = R^3 + (Js - 1) A^3 outside the inclusion, r = Js^(1/3) R inside (docs/model.md s.8)
     X = ngs.CF((ngs.x, ngs.y, ngs.z))
     Rcf = ngs.sqrt(ngs.x**2 + ngs.y**2 + ngs.z**2) + 1e-14
     r_ex = ngs.IfPos(Rcf - A, (Rcf**3 + (JS - 1) * A**3) ** (1 / 3), JS ** (1 / 3) * Rcf)

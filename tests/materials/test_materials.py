@@ -1,4 +1,4 @@
-"""The energy is the single source of truth: the closed-form Kirchhoff stress of MODEL.md must
+"""The energy is the single source of truth: the closed-form Kirchhoff stress of docs/model.md must
 equal ``tau = (d psi / d F) F^T`` of the very energy the solver differentiates."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The 2D hemidisk (MODEL.md sections 4-5): physics that must hold."""
+"""The 2D hemidisk (docs/model.md sections 4-5): physics that must hold."""
 
 from __future__ import annotations
 
@@ -255,7 +255,7 @@ def test_closed_skull_is_infeasible(contact) -> None:
 
 def test_small_disk_matches_inclusion_map() -> None:
     """A small swelling disk far from all boundaries: material circles around it follow
-    ``r^2 = R^2 + (Js - 1) A^2`` (MODEL.md section 7)."""
+    ``r^2 = R^2 + (Js - 1) A^2`` (docs/model.md section 8)."""
     A, Js, c = 0.05, 1.3, np.array([0.0, 0.5])
     case, problem, form, _, sol = _solve(
         contact="noslip",

@@ -1,4 +1,4 @@
-"""Output fields of MODEL.md section 3 on deformations with known answers."""
+"""Output fields of docs/model.md section 3 on deformations with known answers."""
 
 from __future__ import annotations
 

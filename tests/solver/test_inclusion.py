@@ -1,4 +1,4 @@
-"""A swelling incompressible inclusion in an incompressible matrix (MODEL.md section 7).
+"""A swelling incompressible inclusion in an incompressible matrix (docs/model.md section 8).
 
 Incompressibility alone fixes the radial map: in plane strain ``r^2 = R^2 + (Js - 1) A^2``
 outside the disk and ``r = sqrt(Js) R`` inside; for a sphere ``r^3 = R^3 + (Js - 1) A^3`` and

@@ -1,4 +1,4 @@
-"""Homogeneous states with closed-form answers (MODEL.md section 7)."""
+"""Homogeneous states with closed-form answers (docs/model.md section 8)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The 3D craniectomy end to end (MODEL.md section 6).
+"""The 3D craniectomy end to end (docs/model.md section 6).
 
 A mirror-symmetric synthetic brain (an ellipsoid with a 7 mm gray rind around white matter,
 on an unrotated grid, mid-sagittal plane x = 0) with the symmetric bifrontal flap:

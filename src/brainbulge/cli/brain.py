@@ -1,4 +1,4 @@
-"""``brainbulge brain``: one 3D craniectomy scenario on an MRI-derived brain (MODEL.md s.6).
+"""``brainbulge brain``: one 3D craniectomy scenario on an MRI brain (docs/model.md section 6).
 
 White matter swells (``Js: 1 -> --swelling``) in one hemisphere or both; the brain slides
 without friction on the rigid skull and bulges through the flap. The mesh is built from the

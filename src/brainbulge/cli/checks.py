@@ -2,7 +2,7 @@
 
 Each failure is an `InputError` whose one line names the option, the value, the allowed
 range and what to do. The ranges keep a run within what finishes in minutes to hours on a
-workstation and what Netgen can mesh (MODEL.md, docs/outputs.md "Exit codes").
+workstation and what Netgen can mesh (docs/model.md, docs/outputs.md "Exit codes").
 """
 
 from __future__ import annotations

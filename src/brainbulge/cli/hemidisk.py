@@ -1,4 +1,4 @@
-"""``brainbulge hemidisk``: one 2D hemidisk case (MODEL.md sections 4-5)."""
+"""``brainbulge hemidisk``: one 2D hemidisk case (docs/model.md sections 4-5)."""
 
 from __future__ import annotations
 

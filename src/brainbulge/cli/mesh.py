@@ -1,4 +1,4 @@
-"""``brainbulge mesh``: a labelled tetrahedral brain mesh from MRI labels (MODEL.md section 6).
+"""``brainbulge mesh``: a labelled tetrahedral brain mesh from MRI labels (docs/model.md section 6).
 
 Without ``--labels`` the ICBM152 2009a template that nilearn ships is used. Writes
 ``brain.vtu``, ``brain.xdmf``, ``brain.npz`` (fast reload), ``mesh.json`` (sizes, volumes,

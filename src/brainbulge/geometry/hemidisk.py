@@ -1,4 +1,4 @@
-"""The 2D hemidisk of MODEL.md sections 4-5 (plane strain).
+"""The 2D hemidisk of docs/model.md sections 4-5 (plane strain).
 
 A half disk of radius ``R`` over the base ``y = 0``. Boundaries: ``base`` (the straight edge,
 clamped), ``skull`` (the curved edge against the rigid skull) and ``opening`` (the curved edge

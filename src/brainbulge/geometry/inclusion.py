@@ -1,4 +1,4 @@
-"""A swelling inclusion in an incompressible matrix: the verification geometry of MODEL.md s.7.
+"""A swelling inclusion in an incompressible matrix: a check of docs/model.md section 8.
 
 By symmetry only a quarter disk (2D) or an octant of a ball (3D) is meshed. Boundaries:
 ``sym_x`` (plane x = 0, where u_x = 0), ``sym_y``, ``sym_z`` and the traction-free ``outer``

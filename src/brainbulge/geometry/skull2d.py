@@ -1,6 +1,6 @@
 """The 2D hemidisk's skull as an obstacle: the paper's arc, and a rigid shell (an extension).
 
-:class:`SkullArc2D` is the paper's skull (MODEL.md section 4, the default): the circle
+:class:`SkullArc2D` is the paper's skull (docs/model.md section 4, the default): the circle
 ``r = R`` outside the opening, of zero thickness and with a sharp edge at the opening angles.
 
 :class:`RigidSkull2D` is an extension, a rigid body of finite thickness. The skull is a

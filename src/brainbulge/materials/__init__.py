@@ -1,4 +1,4 @@
-"""Constitutive models (MODEL.md section 2): isochoric energies, nothing about meshes."""
+"""Constitutive models (docs/model.md section 2): isochoric energies, nothing about meshes."""
 
 from brainbulge.materials.base import Material
 from brainbulge.materials.mooney_rivlin import MooneyRivlin, neo_hookean

@@ -1,6 +1,6 @@
 """What every constitutive model provides: an isochoric energy ``psibar(F)``.
 
-The full mixed energy of MODEL.md section 2 is ``psi = psibar(F) + p (J - Js)``; the
+The full mixed energy of docs/model.md section 2 is ``psi = psibar(F) + p (J - Js)``; the
 multiplier term is added by the solver (:mod:`brainbulge.solver.mixed`), the same for every
 material, so a material only knows its isochoric part. Stresses and tangents are obtained by
 symbolic differentiation of ``psibar`` (NGSolve ``Variation``): the energy is the single

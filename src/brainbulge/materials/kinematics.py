@@ -1,4 +1,4 @@
-"""Kinematics of MODEL.md section 1 as NGSolve coefficient functions.
+"""Kinematics of docs/model.md section 1 as NGSolve coefficient functions.
 
 ``F = I + Grad u``; in plane strain (2D meshes) ``F`` is embedded in 3x3 with ``F33 = 1``, so
 ``J = det F`` is the in-plane area ratio. Isochoric invariants, with ``b = F F^T`` and

@@ -1,4 +1,4 @@
-"""Incompressible Mooney-Rivlin solid (MODEL.md section 2), neo-Hookean when ``c2 = 0``.
+"""Incompressible Mooney-Rivlin solid (docs/model.md section 2), neo-Hookean when ``c2 = 0``.
 
 Isochoric energy [kPa]::
 

@@ -1,4 +1,4 @@
-"""Incompressible Ogden solid (MODEL.md section 2), the family Mooney-Rivlin belongs to.
+"""Incompressible Ogden solid (docs/model.md section 2), the family Mooney-Rivlin belongs to.
 
 Isochoric energy [kPa] in the principal isochoric stretches ``lbar_k``::
 

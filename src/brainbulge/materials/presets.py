@@ -1,4 +1,4 @@
-"""Tissue parameter presets of MODEL.md section 2 [kPa].
+"""Tissue parameter presets of docs/model.md section 2 [kPa].
 
 ``paper``: the values printed in Weickenmeier et al. (2017), Table 1. ``paper-pa``: the same
 with ``c2`` read as Pa instead of kPa (``c2/c1`` about 1.19 instead of 1190), closer to the

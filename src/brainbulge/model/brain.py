@@ -1,8 +1,8 @@
-"""Case C of MODEL.md section 6: white-matter swelling in a personalised brain (3D).
+"""Case C of docs/model.md section 6: white-matter swelling in a personalised brain (3D).
 
 The labelled brain mesh (:mod:`brainbulge.geometry.brain`, lengths in mm) carries regions
 ``"{tissue}_{side}"`` (gray, white, csf, cerebellum, brainstem; left, right). Every region is
-an incompressible Mooney-Rivlin solid with the parameters of MODEL.md section 2 (the
+an incompressible Mooney-Rivlin solid with the parameters of docs/model.md section 2 (the
 brainstem, absent from the paper's table, takes the cerebellum's), bonded to its neighbours.
 The inferior surface ``base`` is fixed, and with ``fix = "inferior+superior"`` (default,
 the paper's Figure 6) also the ``superior`` band of the outer CSF surface along the superior

@@ -1,4 +1,4 @@
-"""The hemidisk cases of MODEL.md sections 4-5 as :class:`Problem` s.
+"""The hemidisk cases of docs/model.md sections 4-5 as :class:`Problem` s.
 
 The base is clamped. The skull is ``paper`` (the default) or ``rigid`` (an extension).
 

@@ -1,4 +1,4 @@
-"""Clinical metrics of the 3D brain (MODEL.md sections 3 and 6) from nodal arrays.
+"""Clinical metrics of the 3D brain (docs/model.md sections 3 and 6) from nodal arrays.
 
 Pure numpy on a linear tet mesh: reference nodes ``X`` (n, 3) in mm, tets (m, 4), nodal
 displacements ``u`` (n, 3) in mm; the deformed position is ``x = X + u`` and each tet maps
@@ -214,7 +214,7 @@ def swelling_volume_ml(nodes_mm: np.ndarray, tets: np.ndarray, u_mm: np.ndarray,
 
 def prescribed_swelling_volume_ml(nodes_mm: np.ndarray, tets: np.ndarray,
                                   js_tets: np.ndarray) -> float:
-    """The growth volume of MODEL.md section 3, ``sum_e (Js_e - 1) V_e / 1000`` (ml), with
+    """The growth volume of docs/model.md section 3, ``sum_e (Js_e - 1) V_e / 1000`` (ml), with
     ``Js`` per tet and ``V_e`` the reference volume. For incompressible tissue (``Je = 1``)
     it equals :func:`swelling_volume_ml` of the swelling region."""
     v = np.abs(tet_volumes_mm3(np.asarray(nodes_mm, dtype=float), np.asarray(tets)))

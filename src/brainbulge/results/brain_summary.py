@@ -1,4 +1,4 @@
-"""The named outputs of a 3D craniectomy scenario (MODEL.md sections 3 and 6).
+"""The named outputs of a 3D craniectomy scenario (docs/model.md sections 3 and 6).
 
 Every key says what its value is (lengths mm, volumes ml, stresses kPa):
 

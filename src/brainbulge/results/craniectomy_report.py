@@ -64,7 +64,7 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
         "",
         f"White-matter swelling Js 1 -> {scenarios[0].get('swelling', 1.1):g}, frictionless "
         "sliding on the rigid skull, "
-        "traction-free flap (MODEL.md section 6). Midline shift: positive towards the "
+        "traction-free flap (docs/model.md section 6). Midline shift: positive towards the "
         "patient's right.",
         "",
         "| scenario | " + " | ".join(f"{lab} [{u}]" for lab, u in COMPARISON.values()) + " |",

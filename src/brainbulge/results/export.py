@@ -47,7 +47,7 @@ def vertex_fields(
     fibres: Callable[[np.ndarray], np.ndarray] | None = None,
     gradient: ngs.CoefficientFunction | None = None,
 ) -> VertexFields:
-    """Evaluate the outputs of MODEL.md section 3 at the vertices of every element
+    """Evaluate the outputs of docs/model.md section 3 at the vertices of every element
     (``fibres(X)``: unit axon directions replacing the radial default; ``gradient``: the
     state's recovered gradient when the caller has it, else computed here)."""
     mesh = form.mesh

@@ -1,4 +1,4 @@
-"""Output fields of MODEL.md section 3, computed from samples of the solution.
+"""Output fields of docs/model.md section 3, computed from samples of the solution.
 
 At any set of points (integration points for summaries, element vertices for files and
 figures) the solution is sampled as ``X``, ``u``, ``Grad u``, ``p``, ``Js``; everything else is
@@ -139,7 +139,7 @@ def max_principal_strain(C: np.ndarray) -> np.ndarray:
 def output_fields(
     s: Samples, centre: np.ndarray, fibres: np.ndarray | None = None
 ) -> dict[str, np.ndarray]:
-    """All pointwise outputs of MODEL.md section 3 at the sampled points.
+    """All pointwise outputs of docs/model.md section 3 at the sampled points.
 
     ``fibres`` (n, 3) replaces the default radial axon direction from ``centre``.
     """

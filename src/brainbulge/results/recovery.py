@@ -12,7 +12,7 @@ true gradient across a tissue interface (where stiffness and ``Js`` jump) is kep
 ``V_r`` the P1 functions on region ``r``, continuous inside it. On a linear displacement
 ``G* = Grad u`` exactly; on smooth fields ``G*`` converges faster than ``Grad u`` (the
 projection is superconvergent at the nodes of regular meshes) and its values are continuous,
-so that percentiles over the volume converge. Every output of MODEL.md section 3 that depends on
+so that percentiles over the volume converge. Every output of docs/model.md s.3 that depends on
 ``F`` (``J``, stretches, strains) is then evaluated from ``F* = I + G*`` (Zienkiewicz and Zhu's
 recovery, here in its L2-projection form; Hinton and Campbell 1974).
 

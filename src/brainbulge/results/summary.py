@@ -261,7 +261,7 @@ def solution_summary(
     peak_volume: float | None = None,
     points: PointFields | None = None,
 ) -> dict[str, object]:
-    """The summary of MODEL.md section 3 keys for any converged or partial solution.
+    """The summary of docs/model.md section 3 keys for any converged or partial solution.
 
     ``max_*``/``min_*`` leave out points within ``edge_exclusion`` of ``singular_points`` and,
     when given, points where ``near_singular(X)`` is true (e.g. a band around a 3D flap rim).

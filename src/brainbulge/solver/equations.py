@@ -1,7 +1,7 @@
 """The discrete equations Newton solves at one load: residual, its norm, tangent, direction.
 
 The state ``x = (u, p)`` on the free DOFs, with the contact pressures ``lambda``, solves
-``R(x) = 0``: the stationarity of MODEL.md section 2's Lagrangian (NGSolve's ``Variation``,
+``R(x) = 0``: the stationarity of docs/model.md s.2's Lagrangian (NGSolve's ``Variation``,
 or the closed forms of :mod:`brainbulge.solver.fast.mini_tangent` and, in 2D,
 :mod:`brainbulge.solver.fast.mini_plane`) plus the contact forces
 ``-B^T lambda`` and the complementarity of the active set (:mod:`brainbulge.solver.contact`).

@@ -1,6 +1,6 @@
 """Mixed displacement-pressure formulation of the swelling, incompressible solid.
 
-Stationary point of the Lagrangian (MODEL.md section 2) over ``(u, p)``::
+Stationary point of the Lagrangian (docs/model.md section 2) over ``(u, p)``::
 
     Pi(u, p) = int_Omega [ psibar(F) + p (J - Js(t)) ] dV
 

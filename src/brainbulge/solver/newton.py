@@ -1,7 +1,7 @@
 """Newton's method with a backtracking line search on the mixed equations at one load.
 
 At a fixed load factor ``t`` the state ``x = (u, p)`` (with the contact pressures
-``lambda``) solves ``R(x) = 0``, the stationarity of MODEL.md section 2's Lagrangian plus
+``lambda``) solves ``R(x) = 0``, the stationarity of the Lagrangian of docs/model.md section 2 plus
 the contact forces. Newton's iteration is::
 
     K(x_k) dx = R(x_k),        x_{k+1} = x_k - s dx,        lambda_{k+1} = lambda_k - s dlam

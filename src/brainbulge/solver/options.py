@@ -1,7 +1,7 @@
 """What a solve is asked to do (:class:`SolverOptions`) and what it returns (:class:`Solution`).
 
-The load factor ``t`` in [0, 1] ramps the swelling, ``Js(t) = 1 + t (Js - 1)`` (MODEL.md
-section 2); a :class:`Solution` is the last converged state, the load it reached, and, when
+The load factor ``t`` in [0, 1] ramps the swelling, ``Js(t) = 1 + t (Js - 1)`` (docs/model.md
+section 1); a :class:`Solution` is the last converged state, the load it reached, and, when
 the ramp stopped short of ``t = 1``, a structured :class:`Failure`.
 """
 

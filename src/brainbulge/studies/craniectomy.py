@@ -1,7 +1,7 @@
-"""The 3D craniectomy (MODEL.md section 6): one scenario, and the paper's six as a study.
+"""The 3D craniectomy (docs/model.md section 6): one scenario, and the paper's six as a study.
 
 ``run_brain(case, out_dir)`` solves one scenario and writes ``summary.json``, ``fields.vtu``
-(ParaView: every output of MODEL.md section 3 plus region and contact status), ``fields.npz``,
+(ParaView: every output of docs/model.md section 3 plus region and contact status), ``fields.npz``,
 ``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
 ranges) and ``surface.png`` / ``surface.npz`` (the deformed surface seen from above and from
 the flap, :mod:`brainbulge.results.views3d`). A run that stops early keeps the last converged

@@ -131,7 +131,7 @@ def stopped_message(case: HemidiskCase, sol: Solution) -> str:
 
 
 def _expected_area_ratio(case: HemidiskCase) -> float:
-    """Added area / hemidisk area: ``alpha/pi (Js - 1)`` for a sector (MODEL.md s.1)."""
+    """Added area / hemidisk area: ``alpha/pi (Js - 1)`` for a sector (docs/model.md section 1)."""
     if case.alpha is not None:
         return case.alpha / 180.0 * (case.swelling - 1)
     r = case.disk[2] if case.disk else 0.0

@@ -1,4 +1,4 @@
-"""Contact with obstacles known only on point arrays (the 3D skull), MODEL.md sections 6-7.
+"""Contact with obstacles known only on point arrays (the 3D skull), docs/model.md sections 6 and 8.
 
 - derivatives: the constraint rows and the curvature term are the derivatives of the gaps
   and of the contact forces, against a plane and a sphere;

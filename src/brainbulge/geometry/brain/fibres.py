@@ -3,7 +3,7 @@
 A 4D NIfTI of shape (nx, ny, nz, 3) holds a direction per voxel in world (RAS+) axes; the
 direction at a point is that of the nearest voxel, normalised. Where the image gives no
 direction (outside it, or a zero vector), the radial direction from ``centre_mm`` is used, the
-default of MODEL.md section 3. The sign of a direction does not matter: ``lambda_n`` and
+default of docs/model.md section 3. The sign of a direction does not matter: ``lambda_n`` and
 ``lambda_t`` are even in ``n``.
 """
 

@@ -9,7 +9,7 @@ and a tet's element matrix is a few thousand flops, so it is written out here on
 compiled with Numba (written by hand: no library assembles this element; NGSolve's
 bilinear forms with a compiled closed-form Hessian cost as much as its AD, measured).
 
-Energy per unit reference volume (MODEL.md section 2, :mod:`brainbulge.solver.mixed`)::
+Energy per unit reference volume (docs/model.md section 2, :mod:`brainbulge.solver.mixed`)::
 
     W(F, p) = c1/2 (J^(-2/3) I1 - 3) + c2/2 (J^(-4/3) I2 - 3) + p (J - Js)
 
