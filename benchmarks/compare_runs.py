@@ -21,7 +21,7 @@ from pathlib import Path
 #: summary keys compared by default
 KEYS = (
     "midline_shift_mm", "midline_shift_monro_mm", "max_displacement",
-    "max_vertical_displacement", "min_vertical_displacement", "mean_pressure_mmhg",
+    "max_vertical_displacement", "min_vertical_displacement", "mean_hydrostatic_stress_kpa",
     "swelling_volume_ml", "deformed_volume_ml", "bulge_volume_ml",
     "p95_radial_stretch", "p99_radial_stretch", "p05_radial_stretch", "p01_radial_stretch",
     "p95_tangential_stretch", "p99_tangential_stretch", "p05_tangential_stretch",

@@ -144,11 +144,12 @@ def test_midline_and_stress_keys_of_a_solved_brain(toy_run) -> None:
 
 def test_old_keys_are_aliases_for_one_release(toy_run) -> None:
     s, _ = toy_run
-    for old, new in (("white_matter_swelling_ml", "white_matter_volume_ml"),
-                     ("midline_shift_monro_mm", "midline_shift_mm"),
+    for old, new in (("midline_shift_monro_mm", "midline_shift_mm"),
                      ("max_pressure_kpa", "max_hydrostatic_stress_kpa")):
         assert s[old] == s[new] and s["deprecated_keys"][old] == new
-    assert s["mean_pressure_mmhg"] == pytest.approx(7.500617 * s["mean_hydrostatic_stress_kpa"])
+    # keys whose names misled are gone: a tissue stress in "mmHg", a volume called swelling
+    for gone in ("mean_pressure_mmhg", "white_matter_swelling_ml"):
+        assert gone not in s and gone not in s["deprecated_keys"]
 
 
 def test_a_segmentation_without_ventricles_warns(tmp_path: Path,
@@ -214,3 +215,25 @@ def test_study_surfaces_share_one_colour_range_per_field(toy_run, tmp_path: Path
     paths = write_study_surfaces(tmp_path, ["a", "b", "missing"])
     assert [p.name for p in paths] == ["surfaces-above.png", "surfaces-flap.png"]
     assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+def test_the_solved_toy_brain_reports_where_its_extremes_are(toy_run) -> None:
+    """Each site is the point of the summary's extreme (same value), outside the rim band;
+    its peak set holds the 0.1 ml that ``peak_*`` is the threshold of; element maxima of
+    the unsmoothed gradient are at least as extreme as the recovered field's percentiles."""
+    s, _ = toy_run
+    sites = s["extreme_sites"]
+    assert set(sites) == {"max_principal_strain", "max_radial_stretch", "min_radial_stretch",
+                          "max_tangential_stretch"}
+    for key, site in sites.items():
+        assert site["value"] == pytest.approx(s[key], rel=1e-12)
+        assert site["rim_distance_mm"] >= s["edge_exclusion_mm"] - 1e-6
+        assert site["region"].split("_")[0] in {"gray", "white", "cerebellum", "brainstem"}
+        peak = site["peak_set"]
+        assert peak["volume_ml"] >= 0.1 - 1e-9
+        if key.startswith("max_"):  # its threshold is the summary's peak_*
+            assert peak["threshold"] == pytest.approx(s[key.replace("max_", "peak_")])
+        assert 0.0 <= site["peak_set"]["share_under_flap"] <= 1.0
+    assert s["element_max_principal_strain"] >= s["p99_principal_strain"]
+    assert s["element_min_radial_stretch"] <= s["p01_radial_stretch"]
+    assert set(s["element_sites"]) == set(sites)

@@ -35,7 +35,7 @@ SUMMARY_KEYS = [
     "raw_max_principal_strain", "csf_max_principal_strain", "max_vertical_displacement",
     "argmax_radial_stretch", "argmax_tangential_stretch", "max_abs_J_minus_Js",
     "max_penetration", "midline_shift_mm", "swelling_volume_ml", "bulge_volume_ml",
-    "brain_volume_ml", "max_pressure_kpa", "mean_pressure_mmhg", "edge_exclusion_mm",
+    "brain_volume_ml", "max_pressure_kpa", "edge_exclusion_mm",
     "p95_principal_strain", "p95_radial_stretch", "p05_radial_stretch", "p95_csf_principal_strain",
 ]
 #: the bifrontal flap of this small brain (depth 120 mm) removes the skull over its whole

@@ -27,6 +27,7 @@ from brainbulge.geometry.brain.defaults import (
     LARGE_TETS,
     SUPERIOR_ELEVATION_DEG,
     SUPERIOR_WIDTH_MM,
+    VOLUME_OF,
 )
 
 
@@ -51,7 +52,11 @@ def add_parser(sub: Any) -> None:
                    help="label preset (freesurfer, aseg, synthseg, gmwmcsf) or JSON file of "
                    "--labels (default synthseg)")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
-                   help="scale the brain to this intracranial volume [ml]")
+                   help="scale the head so that the --volume-of volume is this [ml]")
+    p.add_argument("--volume-of", choices=VOLUME_OF, default="intracranial",
+                   help="what --brain-volume sets: the intracranial volume (incl. CSF, the "
+                   "default), the brain (cerebral gray + white matter; the paper's 1108 ml) or "
+                   "the white matter")
     p.add_argument("--flap-centre", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
                    help="centre of a custom flap on the skull [mm, RAS]")
     p.add_argument("--flap-diameter", type=positive_float("--flap-diameter"), default=None,
@@ -105,6 +110,7 @@ def config_from_args(args: argparse.Namespace) -> dict[str, Any]:
         "labels": args.labels,
         "label_map": args.label_map or "synthseg",
         "brain_volume_ml": args.brain_volume,
+        "volume_of": args.volume_of,
         "flap_centre_mm": tuple(args.flap_centre) if args.flap_centre else None,
         "flap_diameter_mm": args.flap_diameter,
         "fibres": args.fibres,

@@ -11,6 +11,7 @@ import argparse
 from typing import Any
 
 from brainbulge.errors import InputError
+from brainbulge.geometry.brain.defaults import VOLUME_OF
 
 FLAPS = ("frontal", "left", "right", "custom")
 
@@ -32,7 +33,11 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--tets", type=int, default=100_000, help="about how many tets (default 1e5)")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
-                   metavar="ML", help="scale to this intracranial volume [ml] (paper: 1108)")
+                   metavar="ML", help="scale the head so that the --volume-of volume is this "
+                   "[ml] (the paper's brain, gray + white matter: 1108)")
+    p.add_argument("--volume-of", choices=VOLUME_OF, default="intracranial",
+                   help="what --brain-volume sets: the intracranial volume (incl. CSF, the "
+                   "default), the brain (cerebral gray + white matter) or the white matter")
     p.add_argument("--flap", choices=FLAPS, default=None,
                    help="flap tagged in the VTU/XDMF boundary codes (all are in mesh.json)")
     p.add_argument("--flap-centre", type=float, nargs=3, metavar=("X", "Y", "Z"),
@@ -74,12 +79,12 @@ def run(args: argparse.Namespace) -> int:
                      labelled_ml=sum(image.volumes_ml().values()) if image else None)
     config = {"command": "mesh", "mesh": {
         "labels": args.labels, "label_map": args.label_map, "tets": args.tets,
-        "brain_volume_ml": args.brain_volume, "flap": args.flap,
+        "brain_volume_ml": args.brain_volume, "volume_of": args.volume_of, "flap": args.flap,
         "flap_centre_mm": args.flap_centre, "flap_diameter_mm": args.flap_diameter,
         "base_z_mm": args.base_z, "csf_layer_mm": args.csf_layer, "refine": args.refine}}
     out = start_run(args, config)
     mesh = build_brain_mesh(
-        image, target_tets=args.tets, brain_volume_ml=args.brain_volume,
+        image, target_tets=args.tets, brain_volume_ml=args.brain_volume, volume_of=args.volume_of,
         csf_layer_mm=args.csf_layer, base_z_mm=args.base_z,
         custom_flap_centre_mm=tuple(args.flap_centre) if args.flap_centre else None,
         custom_flap_diameter_mm=args.flap_diameter, refinements=args.refine,

@@ -1,9 +1,11 @@
 """``brainbulge reproduce``: the paper's studies at its resolution (long; resumable).
 
 1. ``sector/``: alpha in {20, 40, 60, 80} x beta in {30, 60, 90, 120} x {no-slip, sliding},
-   Js 1.2, mesh size 0.05 R (Figures 2-4);
-2. ``disk/``: five positions of a swelling disk, Js 1.3, sliding (Figure 5);
-3. ``craniectomy/``: the six 3D scenarios on the ICBM152 brain scaled to the paper's 1108 ml,
+   Js 1.2, mesh size 0.05 R (Figures 2-3);
+2. ``disk/``: five positions of a swelling disk under an opening inclined 30 deg off the
+   symmetry axis, Js 1.3, sliding (Figure 4);
+3. ``craniectomy/``: the six 3D scenarios on the ICBM152 brain, scaled so that its white
+   matter is half the paper's 1108 ml brain (10 % swelling: 55 / 28 ml, as the paper's),
    at the paper's resolution by default (the paper: 1,275,808 tets; here Netgen meshes at
    ``--tets / 8`` and the mesh is refined once, ~1.4M tets). The six scenarios share one
    mesh (``craniectomy/mesh/``) and, from 400k tets on, one coarse mesh for mesh sequencing

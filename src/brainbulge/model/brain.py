@@ -29,6 +29,7 @@ from brainbulge.geometry.brain.defaults import (
     LARGE_TETS,
     SUPERIOR_ELEVATION_DEG,
     SUPERIOR_WIDTH_MM,
+    VOLUME_OF,
 )
 from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
 from brainbulge.materials import MooneyRivlin, preset
@@ -89,7 +90,9 @@ class CraniectomyCase:
         tets: about how many tetrahedra when the mesh is built here.
         mesh: a ``brain.npz`` written by ``brainbulge mesh`` (overrides ``tets``).
         labels, label_map: a NIfTI segmentation and its label map (default: ICBM152).
-        brain_volume_ml: scale the geometry to this intracranial volume [ml].
+        brain_volume_ml: scale the geometry so that the volume ``volume_of`` names is this [ml].
+        volume_of: ``intracranial`` (all tissue incl. CSF), ``brain`` (cerebral gray + white
+            matter) or ``white`` (white matter).
         flap_centre_mm, flap_diameter_mm: a custom flap on the skull [mm].
         fibres: a 4D NIfTI (nx, ny, nz, 3) of axon directions (e.g. DTI V1) in world axes;
             ``lambda_n`` and ``lambda_t`` use them instead of the radial direction.
@@ -131,6 +134,7 @@ class CraniectomyCase:
     labels: str | None = None
     label_map: str = "synthseg"
     brain_volume_ml: float | None = None
+    volume_of: str = "intracranial"
     flap_centre_mm: tuple[float, float, float] | None = None
     flap_diameter_mm: float | None = None
     fibres: str | None = None
@@ -180,6 +184,9 @@ class CraniectomyCase:
             raise InputError(f"edge radius {self.edge_radius_mm} mm must lie in (0, 10]")
         if not 0 <= self.edge_exclusion_mm <= 50:
             raise InputError(f"edge exclusion {self.edge_exclusion_mm} mm must lie in [0, 50]")
+        if self.volume_of not in VOLUME_OF:
+            raise InputError(f"unknown volume_of {self.volume_of!r}; choose one of "
+                             f"{', '.join(VOLUME_OF)}")
         if self.fix not in FIXATIONS:
             raise InputError(f"unknown fixation {self.fix!r}; choose one of "
                              f"{', '.join(FIXATIONS)}")
@@ -191,6 +198,7 @@ class CraniectomyCase:
             # a custom flap is a boundary condition: it opens on the given mesh
             custom = self.flap == "custom"
             geometry = {"--labels": self.labels, "--brain-volume": self.brain_volume_ml,
+                        "--volume-of": None if self.volume_of == "intracranial" else self.volume_of,
                         "--flap-centre": None if custom else self.flap_centre_mm,
                         "--flap-diameter": None if custom else self.flap_diameter_mm,
                         "--label-map": None if self.label_map == "synthseg" else self.label_map}
@@ -263,7 +271,8 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
             if case.flap_diameter_mm is not None:
                 kwargs["custom_flap_diameter_mm"] = case.flap_diameter_mm
         bm = build_brain_mesh(image, target_tets=case.tets,
-                              brain_volume_ml=case.brain_volume_ml, refinements=case.refine,
+                              brain_volume_ml=case.brain_volume_ml, volume_of=case.volume_of,
+                              refinements=case.refine,
                               keep_unrefined=case.nested_coarse, **kwargs)
     if case.flap != "none" and case.flap not in bm.flaps:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "

@@ -44,20 +44,16 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("brainbulge")
 
-KPA_TO_MMHG = 7.500617
 #: old key -> the key that now holds its value (kept one release)
 DEPRECATED_ALIASES = {
     "midline_shift_monro_mm": "midline_shift_mm",
-    "white_matter_swelling_ml": "white_matter_volume_ml",
     "max_pressure_kpa": "max_hydrostatic_stress_kpa",
     "min_pressure_kpa": "min_hydrostatic_stress_kpa",
 }
-#: old keys whose value is derived: ``mean_pressure_mmhg`` = the mean hydrostatic stress in
-#: mmHg (it is no intracranial pressure); ``max_abs_J_minus_Js`` / ``raw_max_abs_J_minus_Js``
+#: old keys whose value is derived: ``max_abs_J_minus_Js`` / ``raw_max_abs_J_minus_Js``
 #: (the summary's single-point maxima of ``|J - Js|``) are superseded by the ``*_abs_Je_minus_1``
 #: statistics
 DEPRECATED_DERIVED = {
-    "mean_pressure_mmhg": "mean_hydrostatic_stress_kpa",
     "max_abs_J_minus_Js": "p95_abs_Je_minus_1",
     "raw_max_abs_J_minus_Js": "raw_max_abs_Je_minus_1",
 }
@@ -133,8 +129,6 @@ def add_deprecated_aliases(out: dict[str, Any]) -> dict[str, Any]:
     for old, new in DEPRECATED_ALIASES.items():
         if new in out:
             out[old] = out[new]
-    if "mean_hydrostatic_stress_kpa" in out:
-        out["mean_pressure_mmhg"] = out["mean_hydrostatic_stress_kpa"] * KPA_TO_MMHG
     present = {**DEPRECATED_ALIASES, **DEPRECATED_DERIVED}
     out["deprecated_keys"] = {old: new for old, new in present.items() if old in out}
     return out

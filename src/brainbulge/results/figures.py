@@ -1,4 +1,4 @@
-"""Figures of 2D fields (matplotlib), in the layouts of the paper's Figures 2-5."""
+"""Figures of 2D fields (matplotlib), in the layouts of the paper's Figures 2-4."""
 
 from __future__ import annotations
 
@@ -147,16 +147,32 @@ def plot_row(
     panels: Sequence[tuple[str, VertexFields]], field: str, path: Path, title: str = ""
 ) -> Path:
     """One field for several runs side by side (e.g. the five disk positions)."""
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.0 * len(panels), 2.0), squeeze=False)
-    vmin, vmax = _limits(field, [v.point_data[field] for _, v in panels])
-    im = None
-    for ax, (label, vf) in zip(axes[0], panels, strict=True):
-        im = _draw(ax, vf, field, vmin, vmax)
-        _outline(ax, vf)
-        ax.set_title(label, fontsize=8)
-    if im is not None:
-        fig.colorbar(im, ax=axes, shrink=0.7, label=LABELS.get(field, field))
-    fig.suptitle(title or LABELS.get(field, field), fontsize=10)
+    return plot_rows(panels, (field,), path, title=title or LABELS.get(field, field))
+
+
+def plot_rows(
+    panels: Sequence[tuple[str, VertexFields]],
+    fields: Sequence[str],
+    path: Path,
+    title: str = "",
+    opening_deg: tuple[float, float] | None = None,
+) -> Path:
+    """Several fields (rows, one colour scale each) for several runs (columns), as the
+    paper's disk figure does with ``lambda_n`` and ``lambda_t``; ``opening_deg``: the
+    opening's angular extent [deg], drawn as a thick arc on every panel."""
+    fig, axes = plt.subplots(len(fields), len(panels),
+                             figsize=(3.0 * len(panels), 2.0 * len(fields)), squeeze=False)
+    for i, (row, field) in enumerate(zip(axes, fields, strict=True)):
+        vmin, vmax = _limits(field, [v.point_data[field] for _, v in panels])
+        im = None
+        for ax, (label, vf) in zip(row, panels, strict=True):
+            im = _draw(ax, vf, field, vmin, vmax)
+            _outline(ax, vf, opening_deg)
+            if i == 0:
+                ax.set_title(label, fontsize=8)
+        if im is not None:
+            fig.colorbar(im, ax=row, shrink=0.7, label=LABELS.get(field, field))
+    fig.suptitle(title or ", ".join(LABELS.get(f, f) for f in fields), fontsize=10)
     return _save(fig, path)
 
 
@@ -165,11 +181,15 @@ def _half(vf: VertexFields, keep_left: bool) -> np.ndarray:
     return cx > 0 if keep_left else cx < 0
 
 
-def _outline(ax, vf: VertexFields) -> None:
-    """The undeformed boundary (a semicircle and its base) as a thin line."""
+def _outline(ax, vf: VertexFields, opening_deg: tuple[float, float] | None = None) -> None:
+    """The undeformed boundary (a semicircle and its base) as a thin line, and the opening's
+    arc ``opening_deg`` [deg] as a thick one."""
     r = np.sqrt((vf.points**2).sum(axis=1)).max()
     t = np.linspace(0, np.pi, 200)
     ax.plot(r * np.cos(t), r * np.sin(t), color="0.3", lw=0.6, ls="--")
+    if opening_deg is not None:
+        t = np.radians(np.linspace(*opening_deg, 60))
+        ax.plot(r * np.cos(t), r * np.sin(t), color="tab:red", lw=2.0)
     ax.set_aspect("equal")
     ax.set_axis_off()
 

@@ -65,6 +65,7 @@ from brainbulge.results.export import (
     vertex_fields,
     write_vtu,
 )
+from brainbulge.results.extreme_sites import brain_extreme_sites
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_write_json, atomic_write_text
 from brainbulge.results.sections import plot_sections
@@ -316,6 +317,9 @@ def brain_summary(
     out["max_hydrostatic_stress_kpa"] = out.pop("max_pressure")
     out["min_hydrostatic_stress_kpa"] = out.pop("min_pressure")
     out["max_penetration_mm"] = out["max_penetration"]
+    if points is not None:
+        out.update(brain_extreme_sites(bm, case.flap, skull, SWELL_SIDES[case.swell], band,
+                                       PARENCHYMA, points, u, PEAK_VOLUME_ML * 1000.0))
     return add_deprecated_aliases(out)
 
 
@@ -383,8 +387,8 @@ def _cached_brain_mesh(path: str) -> BrainMesh:
 
 
 #: the scenario options that shape the mesh (fixed by ``mesh`` once it is built)
-MESH_OPTIONS = ("tets", "labels", "label_map", "brain_volume_ml", "flap_centre_mm",
-                "flap_diameter_mm", "refine")
+MESH_OPTIONS = ("tets", "labels", "label_map", "brain_volume_ml", "volume_of",
+                "flap_centre_mm", "flap_diameter_mm", "refine")
 
 
 def prepare_study_mesh(out_dir: Path, common: dict[str, Any], folder: str = "mesh") -> Path:

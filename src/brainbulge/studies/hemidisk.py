@@ -1,4 +1,4 @@
-"""The hemidisk cases and the paper's 2D studies (Figures 2-5), as runnable tasks.
+"""The hemidisk cases and the paper's 2D studies (its Figures 2-4), as runnable tasks.
 
 ``run_hemidisk(case, out_dir)`` solves one case and writes ``summary.json``, ``fields.vtu``
 (ParaView), ``fields.npz`` (vertex fields for figures) and ``fields.png``. A run that stops
@@ -8,13 +8,15 @@ early keeps the last converged state on disk, marked ``"converged": false``, and
 Studies:
 
 - ``hemidisk-sector``: alpha x beta x {noslip, sliding} at Js = 1.2;
-- ``hemidisk-disk``: five positions of a swelling disk (Js = 1.3), sliding contact.
+- ``hemidisk-disk``: five positions of a swelling disk (Js = 1.3) under an opening inclined
+  off the symmetry axis, sliding contact.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +32,13 @@ from brainbulge.results.export import (
     vertex_fields,
     write_vtu,
 )
-from brainbulge.results.figures import plot_fields, plot_grid, plot_row, plot_side_by_side
+from brainbulge.results.figures import (
+    plot_fields,
+    plot_grid,
+    plot_row,
+    plot_rows,
+    plot_side_by_side,
+)
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_output, atomic_write_json
 from brainbulge.results.summary import point_fields, solution_summary
@@ -40,14 +48,19 @@ from brainbulge.studies.runner import stopped_summary
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
 SECTOR_BETAS = (30.0, 60.0, 90.0, 120.0)
-#: (label, disk centre x, centre y, radius) in units of R: under the opening, off-centre,
-#: deep, lateral and off-axis under a lateral opening (the paper's Figure 5 spirit)
+#: The swelling-disk case (the paper's Figure 1B) inclines the opening off the symmetry axis:
+#: its centre at this angle [deg] from the base (90 = on the axis), so with beta = 60 the
+#: opening spans 30-90 deg and the axis passes through its edge.
+DISK_OPENING_CENTER = 60.0
+#: (label, angle of the disk's centre [deg], its distance from the hemidisk's centre [R], its
+#: radius [R]): five disks on one arc, under the opening's far edge, its centre and its edge on
+#: the axis, then under the skull 30 and 60 deg past that edge (swelling Js 1.3).
 DISK_POSITIONS = (
-    ("top", 0.0, 0.7, 0.15),
-    ("middle", 0.0, 0.45, 0.15),
-    ("deep", 0.0, 0.2, 0.15),
-    ("lateral", 0.45, 0.5, 0.15),
-    ("far-lateral", 0.7, 0.25, 0.15),
+    ("edge-30", 30.0, 0.55, 0.15),
+    ("centre-60", 60.0, 0.55, 0.15),
+    ("edge-90", 90.0, 0.55, 0.15),
+    ("skull-120", 120.0, 0.55, 0.15),
+    ("skull-150", 150.0, 0.55, 0.15),
 )
 
 
@@ -164,17 +177,20 @@ def sector_scenarios(
 
 
 def disk_scenarios(**common: Any) -> list[dict[str, Any]]:
-    """Five disk positions (Figure 5), sliding contact, Js = 1.3."""
+    """The five disk positions of :data:`DISK_POSITIONS` (the paper's Figure 4) under the
+    inclined opening of :data:`DISK_OPENING_CENTER`, sliding contact, Js = 1.3."""
     return [
         {
             "name": f"disk_{label}",
+            "opening_center": DISK_OPENING_CENTER,
             **common,
             "alpha": None,
-            "disk": [x, y, r],
+            "disk": [round(dist * math.cos(math.radians(angle)), 6),
+                     round(dist * math.sin(math.radians(angle)), 6), radius],
             "contact": "sliding",
             "swelling": common.get("swelling", 1.3),
         }
-        for label, x, y, r in DISK_POSITIONS
+        for label, angle, dist, radius in DISK_POSITIONS
     ]
 
 
@@ -311,4 +327,9 @@ def disk_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list
         panels.append((label, load_vertex_fields(fields)))
     if not panels:
         return []
-    return [plot_row(panels, f, out_dir / f"disk_{f}.png") for f in ("lambda_n", "lambda_t")]
+    paths = [plot_row(panels, f, out_dir / f"disk_{f}.png") for f in ("lambda_n", "lambda_t")]
+    opening = HemidiskCase(**{k: v for k, v in scenarios[0].items() if k != "name"}).geometry
+    paths.append(plot_rows(panels, ("lambda_n", "lambda_t"), out_dir / "disk_panel.png",
+                           title="swelling disk, Js 1.3, sliding: lambda_n (top), lambda_t",
+                           opening_deg=opening.opening_angles_deg))
+    return paths

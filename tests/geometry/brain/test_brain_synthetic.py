@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from brainbulge.cli import main as cli_main
+from brainbulge.errors import InputError
 from brainbulge.geometry.brain import (
     RigidSkull,
     build_brain_mesh,
@@ -308,3 +309,20 @@ def test_cli_mesh_refine(tmp_path, capsys) -> None:
         assert code == 0, capsys.readouterr().err
         runs[refine] = json.loads((out / "mesh.json").read_text())["tets"]
     assert runs["1"] == 8 * runs["0"]
+
+
+@pytest.mark.parametrize("volume_of", ["brain", "white"])
+def test_scaling_to_the_brain_or_its_white_matter(synthetic_image, volume_of) -> None:
+    """``volume_of`` picks what ``brain_volume_ml`` sets: 0.7 of the image's gray + white (or
+    white) matter comes out so in the mesh, and the other tissues shrink by the same ratio."""
+    voxel = synthetic_image.volumes_ml()
+    before = voxel["white"] + (voxel["gray"] if volume_of == "brain" else 0.0)
+    mesh = build_brain_mesh(synthetic_image, target_tets=8_000, brain_volume_ml=0.7 * before,
+                            volume_of=volume_of)
+    vols = mesh.tissue_volumes_ml()
+    after = vols["white"] + (vols["gray"] if volume_of == "brain" else 0.0)
+    assert after == pytest.approx(0.7 * before, rel=0.03)
+    assert vols["cerebellum"] == pytest.approx(0.7 * voxel["cerebellum"], rel=0.03)
+    with pytest.raises(InputError, match="volume_of"):
+        build_brain_mesh(synthetic_image, target_tets=8_000, brain_volume_ml=100.0,
+                         volume_of="skull")

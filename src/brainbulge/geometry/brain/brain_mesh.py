@@ -26,6 +26,7 @@ from brainbulge.geometry.brain.boundaries import (
     frontal_flap,
     unilateral_flap,
 )
+from brainbulge.geometry.brain.defaults import VOLUME_OF
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
 from brainbulge.geometry.brain.interfaces import fit_interfaces
 from brainbulge.geometry.brain.labels import TISSUES, TissueImage
@@ -188,6 +189,7 @@ def build_brain_mesh(
     image: TissueImage | None = None,
     target_tets: int = 100_000,
     brain_volume_ml: float | None = None,
+    volume_of: str = "intracranial",
     csf_layer_mm: float = 1.5,
     base_z_mm: float | None = None,
     midsagittal: MidSagittalPlane | None = None,
@@ -202,8 +204,11 @@ def build_brain_mesh(
     """Build the labelled brain mesh (see module docstring).
 
     ``image``: tissue labels (default: the ICBM152 template); ``target_tets``: about how many
-    tetrahedra; ``brain_volume_ml``: scale the geometry so that the intracranial volume (all
-    meshed tissue incl. CSF) is this (the paper: 1108 ml); ``csf_layer_mm``: CSF between brain
+    tetrahedra; ``brain_volume_ml``: scale the geometry (uniformly, about the envelope's
+    centre) so that the volume ``volume_of`` names (:data:`~brainbulge.geometry.brain.defaults.
+    VOLUME_OF`: the intracranial volume, all meshed tissue incl. CSF; the ``brain``, cerebral
+    gray + white matter, the paper's 1108 ml; or the ``white`` matter) is this [ml]; the
+    tissues' volumes are the image's scaled by the factor cubed; ``csf_layer_mm``: CSF between brain
     and skull; ``base_z_mm``: cut plane of the fixed base (default: 12 % of the height above the
     lowest point); ``midsagittal``: the left/right plane (default x = 0 for the template, else
     through the brain centroid). Flaps ``frontal``, ``left``, ``right`` are always made, and
@@ -234,7 +239,7 @@ def build_brain_mesh(
     if brain_volume_ml is not None:
         if not 50.0 <= brain_volume_ml <= 5000.0:
             raise InputError(f"brain volume {brain_volume_ml} ml is outside 50-5000 ml")
-        factor = (brain_volume_ml / envelope.volume_ml()) ** (1 / 3)
+        factor = (brain_volume_ml / _volume_of(image, envelope, volume_of)) ** (1 / 3)
         centre = envelope.centre_mm()
         image = image.scaled_about(factor, centre)
         envelope = IntracranialEnvelope(envelope.sdf_mm * np.float32(factor),
@@ -362,6 +367,20 @@ def _component_nearest(faces: np.ndarray, mask: np.ndarray, centroids: np.ndarra
     out = np.zeros_like(mask)
     out[idx[comp == comp[nearest]]] = True
     return out
+
+
+def _volume_of(image: TissueImage, envelope: IntracranialEnvelope, volume_of: str) -> float:
+    """The unscaled volume [ml] that ``brain_volume_ml`` sets (:data:`VOLUME_OF`)."""
+    if volume_of not in VOLUME_OF:
+        raise InputError(f"volume_of {volume_of!r} unknown; choose one of {', '.join(VOLUME_OF)}")
+    if volume_of == "intracranial":
+        return envelope.volume_ml()
+    vols = image.volumes_ml()
+    volume = vols["white"] + (vols["gray"] if volume_of == "brain" else 0.0)
+    if volume <= 0:
+        raise InputError(f"the label image has no {volume_of} matter to scale to; scale the "
+                         "intracranial volume instead")
+    return float(volume)
 
 
 def _scale_affine(affine: np.ndarray, factor: float, centre_mm: np.ndarray) -> np.ndarray:

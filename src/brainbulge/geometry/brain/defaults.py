@@ -10,6 +10,10 @@ importing the meshing stack."""
 #: tets and 6 mm at 1.54M, 8 mm converged there; not yet measured at that size in the bone.
 EDGE_RADIUS_MM = 8.0
 
+#: What ``brain_volume_ml`` scales the geometry to: the ``intracranial`` volume (all meshed
+#: tissue incl. CSF), the ``brain`` (cerebral gray + white matter) or the ``white`` matter.
+VOLUME_OF = ("intracranial", "brain", "white")
+
 #: The fixed part of the brain's outer surface: the inferior surface (the base), or that and
 #: the superior band along the midline (the paper's Figure 6, the default).
 FIXATIONS = ("inferior", "inferior+superior")
