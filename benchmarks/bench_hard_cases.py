@@ -1,0 +1,279 @@
+"""Hard-case benchmark: the contact cases that stall, per case and per contact formulation.
+
+Prints one row per (case, formulation): converged, load reached, Newton iterations, rejected
+load steps, wall time of the solve, and the case's headline output (2D: the vertical
+displacement's largest vertical component ``max u_y`` [R]; 3D: bulge volume and Monro shift).
+
+2D cases (plane strain, the paper's skull: the arc ``r = R`` outside the opening):
+alpha 80 / beta 30 and alpha 60 / beta 30, sliding and no-slip, and the headline alpha 80 /
+beta 60. Formulations compared for sliding contact (``--variants``):
+
+- ``production``: the product's path, ``brainbulge hemidisk`` (rezoning included): the
+  material arc held on the whole circle ``r <= R``, also past the opening's edge.
+- ``released``: the gap is the signed distance to the skull's region
+  ``S = {r >= R, |delta| >= beta/2}`` (the arc and, past its edge, the edge's outward ray),
+  so that a point that slides past the edge is released continuously; exact multipliers
+  (the product's primal-dual active set), no rezoning.
+- ``released-per-solve``: the held arc inside each Newton solve; between solves, points that
+  have slid past the edge are released (multiplier set to zero, gap to ``S`` from then on);
+  at full load, release and re-solve until no point is held past the edge. No rezoning.
+- ``released-opening``: as ``released-per-solve``, and the opening's boundary also in contact
+  with ``S`` (tissue may not fold back over the skull's edge).
+- ``edge``: as ``released-per-solve`` with the released points free (the zero-thickness
+  skull ends at its edge), and the skull's two edge points kept outside the tissue by
+  segment contact (:mod:`edge_contact`), so that the edge cannot cut into the tissue
+  between two nodes. No rezoning, no hotspot relaxation.
+
+3D (``--3d``): the six craniectomy scenarios at 21k tets (``brainbulge study craniectomy``).
+
+Rerun with ``python benchmarks/bench_hard_cases.py`` (about 5 min on 2 cores; add ``--3d``
+for the six brain scenarios, about 2 min more). Each row runs in its own process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+CASES_2D = {
+    "a80b30": (80.0, 30.0),
+    "a60b30": (60.0, 30.0),
+    "a80b60": (80.0, 60.0),
+}
+VARIANTS = ("production", "released", "released-per-solve", "released-opening", "edge")
+
+
+# --- the skull region S and its signed distance ---------------------------------------
+def region_gap(R: float, beta_deg: float, center_deg: float, x: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance ``g`` to ``S = {r >= R, |delta| >= beta/2}`` (positive outside
+    ``S``) and its gradient, at points ``x`` (n, 2) [length, -].
+
+    Outside ``S`` on the skull's side, ``g = R - r`` (the arc); in the opening's cone the
+    nearest point of ``S`` is on the edge's ray ``{t e, t >= R}``, the corner included;
+    inside ``S``, ``-min(r - R, distance to the ray's line)``.
+    """
+    th = math.radians(center_deg)
+    c, s = math.cos(th), math.sin(th)
+    xr = x[:, 0] * c + x[:, 1] * s
+    yr = -x[:, 0] * s + x[:, 1] * c
+    sign = np.where(yr < 0, -1.0, 1.0)
+    ya = np.abs(yr)
+    r = np.hypot(xr, ya)
+    half = math.radians(beta_deg) / 2
+    ex, ey = math.cos(half), math.sin(half)
+    t = np.maximum(xr * ex + ya * ey, R)
+    dx, dy = xr - t * ex, ya - t * ey
+    d_ray = np.hypot(dx, dy)
+    safe_r, safe_d = np.maximum(r, 1e-300), np.maximum(d_ray, 1e-300)
+    arc_nx, arc_ny = -xr / safe_r, -ya / safe_r
+    cone = np.arctan2(ya, xr) < half
+    g = np.where(cone, d_ray, R - r)
+    nx = np.where(cone, dx / safe_d, arc_nx)
+    ny = np.where(cone, dy / safe_d, arc_ny)
+    ray = ~cone & (r > R) & (t > R) & (d_ray < r - R)
+    g = np.where(ray, -d_ray, g)
+    nx, ny = np.where(ray, -dx / safe_d, nx), np.where(ray, -dy / safe_d, ny)
+    corner = cone & (d_ray < 1e-8 * R)  # at the corner: the arc's normal
+    nx, ny = np.where(corner, arc_nx, nx), np.where(corner, arc_ny, ny) * sign
+    return g, np.column_stack([nx * c - ny * s, nx * s + ny * c])
+
+
+def in_cone(R: float, beta_deg: float, center_deg: float, x: np.ndarray) -> np.ndarray:
+    """Whether points ``x`` (n, 2) lie at the opening's angles."""
+    th = math.radians(center_deg)
+    xr = x[:, 0] * math.cos(th) + x[:, 1] * math.sin(th)
+    yr = -x[:, 0] * math.sin(th) + x[:, 1] * math.cos(th)
+    return np.abs(np.arctan2(yr, xr)) < math.radians(beta_deg) / 2 - 1e-9
+
+
+def edge_points(R: float, beta_deg: float, center_deg: float) -> np.ndarray:
+    """The skull's two sharp edges (2, 2) [length]."""
+    th = math.radians(center_deg) + np.array([-1.0, 1.0]) * math.radians(beta_deg) / 2
+    return R * np.column_stack([np.cos(th), np.sin(th)])
+
+
+# --- one 2D run -----------------------------------------------------------------------
+def run_2d_production(alpha: float, beta: float, contact: str) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "brainbulge", "hemidisk", "--alpha", str(alpha),
+                        "--beta", str(beta), "--contact", contact, "--out", tmp,
+                        "--overwrite"], capture_output=True)
+        wall = time.perf_counter() - t0
+        s = json.loads((Path(tmp) / "summary.json").read_text())
+    return {"converged": bool(s.get("converged", True)), "load": s["load_reached"],
+            "newton": s["newton_iterations"], "rejected": s["rejected_steps"],
+            "rezones": s["rezones"], "wall_s": wall, "solve_s": s["wall_time_s"],
+            "top_uy": s.get("max_vertical_displacement")}
+
+
+def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dict:
+    """A formulation of :data:`VARIANTS` other than production, in this process (it
+    replaces the point contacts' gap evaluation)."""
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.model.problem import Contact
+    from brainbulge.solver import ramp
+    from brainbulge.solver.contact import points
+    from brainbulge.solver.mixed import MixedForm
+    from brainbulge.solver.newton import NewtonSolver
+    from brainbulge.solver.options import SolverOptions
+
+    case = HemidiskCase(alpha=alpha, beta=beta, contact=contact)
+    arc = case.skull_arc
+    geo = (arc.R, arc.beta_deg, arc.center_deg)
+    per_solve = variant != "released"
+
+    def gaps(x: np.ndarray, released: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if not per_solve:
+            return region_gap(*geo, x)
+        g, n = arc.gap_and_normal(x)
+        if released.any():
+            if variant == "edge":
+                g[released] = np.inf
+            else:
+                g[released], n[released] = region_gap(*geo, x[released])
+        return g, n
+
+    def update(self, x: np.ndarray) -> None:
+        if not hasattr(self, "released"):
+            self.released = in_cone(*geo, self.X)
+        self.x = self.X + (self.P @ x).reshape(self.n_points, self.dim)
+        g, self.n = gaps(self.x, self.released)
+        self.g = g - self.g0
+
+    def hessian(self, on: np.ndarray) -> np.ndarray:
+        x, rel, d = self.x[on], self.released[on], 1e-3 * self.form.h
+        H = np.empty((len(x), self.dim, self.dim))
+        for k in range(self.dim):
+            e = np.zeros(self.dim)
+            e[k] = d
+            H[:, :, k] = (gaps(x + e, rel)[1] - gaps(x - e, rel)[1]) / (2 * d)
+        return 0.5 * (H + H.transpose(0, 2, 1))
+
+    points.PointContact.update = update
+    points.PointContact.hessian = hessian
+    ramp.check_feasible = lambda solver: None  # the opening's points are off S at rest
+    problem = hemidisk_problem(case)
+    if variant == "released-opening":
+        problem.contacts = [Contact("skull|opening", arc)]
+    form = MixedForm(problem, element=case.element)
+    if variant == "edge":
+        from edge_contact import EdgeContact
+
+        form.point_contacts.append(EdgeContact(form, "skull|opening", edge_points(*geo)))
+    solver = NewtonSolver(form, SolverOptions(steps=case.steps))
+    if variant == "edge":
+        solver.relaxation = None  # its local problems know vertex contact points only
+        solver.contact.moving[-1][:] = True
+
+    def release(x) -> int:
+        n = 0
+        for pc in form.point_contacts:
+            if not hasattr(pc, "released"):
+                continue  # the edge points
+            pc.update(x.FV().NumPy())
+            new = in_cone(*geo, pc.x) & ~pc.released
+            pc.released |= new
+            pc.lam[new] = 0.0
+            n += int(new.sum())
+        return n
+
+    newton = solver.newton
+    if per_solve:
+        def released_newton(x, *args, **kwargs):
+            release(x)
+            return newton(x, *args, **kwargs)
+        solver.newton = released_newton
+    t0 = time.perf_counter()
+    sol = solver.solve()
+    outer = 0
+    while per_solve and sol.converged and outer < 20 and release(form.gfu.vec):
+        outer += 1
+        ok, its, _ = newton(form.gfu.vec)
+        sol.steps[-1].newton_iterations += its
+        sol.converged = ok
+    wall = time.perf_counter() - t0
+    mesh = form.mesh
+    uy = max(form.u(mesh(*v.point))[1] for v in mesh.vertices)
+    return {"converged": sol.converged, "load": sol.load, "newton": sol.newton_iterations,
+            "rejected": sol.rejected_steps, "rezones": 0, "wall_s": wall, "solve_s": wall,
+            "top_uy": float(uy), "outer": outer}
+
+
+def run_3d(out: Path) -> list[dict]:
+    folder = out / "craniectomy"
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "brainbulge", "study", "craniectomy", "--tets",
+                    "21000", "--workers", "1", "--out", str(folder), "--overwrite"],
+                   capture_output=True)
+    wall = time.perf_counter() - t0
+    rows = []
+    for path in sorted(folder.glob("*/summary.json")):
+        s = json.loads(path.read_text())
+        rows.append({"case": path.parent.name, "converged": s.get("converged", True),
+                     "load": s.get("load_reached", 1.0), "newton": s.get("newton_iterations"),
+                     "solve_s": s.get("wall_time_s"), "bulge_ml": s.get("bulge_volume_ml"),
+                     "monro_mm": s.get("monro_shift_mm", s.get("midline_shift_mm"))})
+    print(f"\n3D study wall time {wall:.0f} s")
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", nargs="+", default=list(CASES_2D), choices=list(CASES_2D))
+    ap.add_argument("--contacts", nargs="+", default=["sliding", "noslip"])
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    ap.add_argument("--3d", dest="three_d", action="store_true", help="the six 3D scenarios")
+    ap.add_argument("--one", nargs=4, help=argparse.SUPPRESS)  # ALPHA BETA CONTACT VARIANT
+    args = ap.parse_args()
+    if args.one:
+        alpha, beta, contact, variant = args.one
+        print(json.dumps(run_2d_variant(float(alpha), float(beta), contact, variant)))
+        return
+    print("| case | contact | formulation | converged | load | Newton | rejected | rezones "
+          "| solve s | max u_y |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in args.cases:
+        alpha, beta = CASES_2D[name]
+        for contact in args.contacts:
+            for variant in args.variants:
+                if contact == "noslip" and variant != "production":
+                    continue  # the release concerns sliding only
+                if variant == "production":
+                    row = run_2d_production(alpha, beta, contact)
+                else:
+                    done = subprocess.run(
+                        [sys.executable, __file__, "--one", str(alpha), str(beta), contact,
+                         variant], capture_output=True, text=True)
+                    lines = done.stdout.strip().splitlines()
+                    if done.returncode or not lines:
+                        print(f"| {name} | {contact} | {variant} | error: "
+                              f"{done.stderr.strip().splitlines()[-1:]} |")
+                        continue
+                    row = json.loads(lines[-1])
+                top = row["top_uy"]
+                print(f"| {name} | {contact} | {variant} | {row['converged']} | "
+                      f"{row['load']:.3f} | {row['newton']} | {row['rejected']} | "
+                      f"{row['rezones']} | {row['solve_s']:.1f} | "
+                      f"{'-' if top is None else f'{top:.4f}'} |", flush=True)
+    if args.three_d:
+        with tempfile.TemporaryDirectory() as tmp:
+            rows = run_3d(Path(tmp))
+        print("| scenario | converged | load | Newton | solve s | bulge ml | Monro mm |")
+        print("|---|---|---|---|---|---|---|")
+        for r in rows:
+            print(f"| {r['case']} | {r['converged']} | {r['load']} | {r['newton']} | "
+                  f"{r['solve_s']} | {r['bulge_ml']} | {r['monro_mm']} |")
+
+
+if __name__ == "__main__":
+    main()

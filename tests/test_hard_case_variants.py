@@ -1,0 +1,49 @@
+"""The hard-case benchmark's contact variants: their gaps are distances with exact gradients."""
+
+import math
+
+import numpy as np
+
+from bench_hard_cases import region_gap
+from edge_contact import segment_gap
+
+
+def test_region_gap_is_the_distance_to_the_skull_region_with_its_gradient():
+    """``S = {r >= 1, |delta| >= 15 deg}`` about the vertical: ``g = 1 - r`` under the arc,
+    the distance to the edge point just past it, minus the distance to the edge's ray
+    inside ``S``; ``grad g`` matches central differences away from the edge."""
+    R, beta, centre = 1.0, 30.0, 90.0
+    edge = np.array([math.cos(math.radians(75)), math.sin(math.radians(75))])
+    pts = np.array([
+        [math.cos(math.radians(60)) * 0.9, math.sin(math.radians(60)) * 0.9],  # under the arc
+        0.98 * np.array([math.cos(math.radians(80)), math.sin(math.radians(80))]),  # past it
+        1.1 * np.array([math.cos(math.radians(70)), math.sin(math.radians(70))]),  # inside S
+    ])
+    g, n = region_gap(R, beta, centre, pts)
+    assert math.isclose(g[0], 0.1, rel_tol=1e-12)
+    assert math.isclose(g[1], float(np.linalg.norm(pts[1] - edge)), rel_tol=1e-12)
+    assert math.isclose(g[2], -1.1 * math.sin(math.radians(5)), rel_tol=1e-12)
+    eps = 1e-7
+    for k in range(2):
+        e = np.zeros(2)
+        e[k] = eps
+        fd = (region_gap(R, beta, centre, pts + e)[0] - region_gap(R, beta, centre, pts - e)[0])
+        np.testing.assert_allclose(fd / (2 * eps), n[:, k], atol=1e-6)
+
+
+def test_segment_gap_is_signed_and_its_gradient_exact():
+    """The edge point's distance from a segment's line is positive on the right of a -> b
+    (outside the tissue on its left), and its gradient in (a, b) matches central
+    differences."""
+    C = np.array([0.3, -0.2])
+    a, b = np.array([0.0, 0.0]), np.array([1.0, 0.1])
+    g, grad = segment_gap(C, a, b)
+    assert g > 0
+    assert segment_gap(np.array([0.3, 0.5]), a, b)[0] < 0
+    eps = 1e-7
+    z = np.concatenate([a, b])
+    for j in range(4):
+        e = np.zeros(4)
+        e[j] = eps
+        fd = (segment_gap(C, *np.split(z + e, 2))[0] - segment_gap(C, *np.split(z - e, 2))[0])
+        assert abs(fd / (2 * eps) - grad[j]) < 1e-6
