@@ -225,6 +225,14 @@ def run_text(run: Run) -> str:
             f"{status.get('status', '?')}")
     if status.get("message"):
         text += f" ({status['message']})"
+    try:
+        from datetime import datetime
+
+        wall = (datetime.fromisoformat(status["time"])
+                - datetime.fromisoformat(info["start_time"])).total_seconds()
+        text += f", wall time {int(wall // 60)} min {int(wall % 60)} s (to the last status)"
+    except (KeyError, TypeError, ValueError):
+        pass
     return text.replace(root, "OUT").replace(str(run.root), "OUT")
 
 
