@@ -48,6 +48,8 @@ def test_sites_say_region_interface_and_distances() -> None:
     assert b["swelling_distance_mm"] > 4.0  # the nearest white centroid is > 5 mm in x away
     at = ctx.describe(np.array([[5.1, 4.0, 4.0]]))[0]  # next to the x = 5 interface
     assert at["region"] == "gray_left" and at["at_interface"]
+    # the interface nodes lie on x = 5 (2.5 mm apart in y and z)
+    assert at["interface_distance_mm"] < 1.9 and a["interface_distance_mm"] > 3.9
     # the containing tet, not just the nearest centroid
     t = ctx.containing_tets(centroids[[3, 40, 200]] + 1e-3)
     assert list(t) == [3, 40, 200]

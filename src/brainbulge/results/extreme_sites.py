@@ -10,12 +10,17 @@ flap's rim) :func:`extreme_sites` gives
 - the point: its ``region``, ``rim_distance_mm`` (to the flap's rim, the curve where the
   cutting cylinder meets the skull's inner surface), ``under_flap`` (inside the cutting
   cylinder), ``depth_mm`` (below the skull's inner surface), ``swelling_distance_mm`` (to the
-  nearest swelling element's centroid; 0 inside one) and ``at_interface`` (its element
-  touches another region: an interface artefact when the value stands out from the peak);
+  nearest swelling element's centroid; 0 inside one), ``at_interface`` (its element
+  touches another region, where the stiffness or the swelling jumps and the field is
+  singular) and ``interface_distance_mm`` (to the nearest node on such an interface). On a
+  coarse brain mesh nearly every parenchyma element touches an interface (the cortex is
+  thinner than an element), so the distance says more than the flag there; an extreme whose
+  element recurs in several scenarios is a property of that element, not of the load;
 - the ``peak_set``: the 0.1 ml of that tissue with the most extreme values (the set whose
-  ``threshold`` is the summary's ``peak_*``): its median rim distance and depth and the shares of
-  it under the flap and at interfaces. A peak set near the rim is a "ring around the
-  opening"; one under the flap, away from the rim, is "deep inside the bulge".
+  ``threshold`` is the summary's ``peak_*``): its median rim distance, depth and distance to
+  an interface, and the shares of it under the flap and at interfaces. A peak set near the
+  rim is a "ring around the opening"; one under the flap, away from the rim, is "deep
+  inside the bulge".
 
 :func:`element_extremes` gives the same extremes of the element values (the stretches of the
 element-constant deformation gradient of the P1 displacement, what a linear tetrahedron such
@@ -77,6 +82,14 @@ class SiteContext:
             np.minimum.at(lo, self.tets[:, k], codes)
             np.maximum.at(hi, self.tets[:, k], codes)
         self.interface_node = lo != hi
+        pts = self.nodes[self.interface_node]
+        self._interface_tree = cKDTree(pts) if len(pts) else None
+
+    def interface_distance(self, X: np.ndarray) -> np.ndarray:
+        """Distance [mm] from each point to the nearest node on a region interface."""
+        if self._interface_tree is None:
+            return np.full(len(X), np.inf)
+        return self._interface_tree.query(X)[0]
 
     def containing_tets(self, X: np.ndarray) -> np.ndarray:
         """Index of the tet that contains each point (the nearest centroid's when none of the
@@ -109,6 +122,7 @@ class SiteContext:
             d_sw = np.full(len(X), np.inf)
         rim, under, depth = self.rim_distance(X), self.under_flap(X), self.depth(X)
         at_if = self.interface_node[self.tets[tets]].any(axis=1)
+        d_if = self.interface_distance(X)
         return [{"X_mm": [round(float(c), 2) for c in X[i]],
                  "region": str(self.regions[tets[i]]),
                  "rim_distance_mm": round(float(rim[i]), 2),
@@ -116,7 +130,8 @@ class SiteContext:
                  "depth_mm": round(float(depth[i]), 2),
                  "swelling_distance_mm": (round(float(d_sw[i]), 2) if np.isfinite(d_sw[i])
                                           else None),
-                 "at_interface": bool(at_if[i])} for i in range(len(X))]
+                 "at_interface": bool(at_if[i]),
+                 "interface_distance_mm": round(float(d_if[i]), 2)} for i in range(len(X))]
 
     def peak_set(self, X: np.ndarray, weights: np.ndarray) -> dict[str, float]:
         """Where a set of points (e.g. the 0.1 ml of the largest values) lies: medians and
@@ -131,6 +146,8 @@ class SiteContext:
             "share_under_flap": round(float(w[self.under_flap(X)].sum()) / total, 3),
             "share_at_interface": round(
                 float(w[self.interface_node[self.tets[tets]].any(axis=1)].sum()) / total, 3),
+            "median_interface_distance_mm": round(
+                _weighted_median(self.interface_distance(X), w), 2),
         }
 
 

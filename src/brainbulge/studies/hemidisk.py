@@ -328,7 +328,7 @@ def disk_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list
     if not panels:
         return []
     paths = [plot_row(panels, f, out_dir / f"disk_{f}.png") for f in ("lambda_n", "lambda_t")]
-    opening = HemidiskCase(**{k: v for k, v in scenarios[0].items() if k != "name"}).geometry
+    opening = case_from_dict({k: v for k, v in scenarios[0].items() if k != "name"}).geometry
     paths.append(plot_rows(panels, ("lambda_n", "lambda_t"), out_dir / "disk_panel.png",
                            title="swelling disk, Js 1.3, sliding: lambda_n (top), lambda_t",
                            opening_deg=opening.opening_angles_deg))
