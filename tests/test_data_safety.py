@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 import brainbulge.studies.hemidisk as hd
+from brainbulge.atomic import JOURNAL, atomic_output, atomic_write_text, note_written
 from brainbulge.cli import main
 from brainbulge.errors import InputError
 from brainbulge.results.output_folder import LOCK_FILE, claim_output_dir, read_manifest
@@ -40,7 +41,12 @@ def fake_run(files: dict[str, bytes], error: BaseException | None = None):
     def run(case, out, progress=False):
         for name, data in files.items():
             (Path(out) / name).parent.mkdir(parents=True, exist_ok=True)
-            (Path(out) / name).write_bytes(data)
+            if data:  # as brainbulge writes: atomically, and so into the manifest
+                with atomic_output(Path(out) / name) as tmp:
+                    tmp.write_bytes(data)
+            else:  # what a full disk leaves
+                (Path(out) / name).write_bytes(data)
+                note_written(Path(out) / name)
         if error is not None:
             raise error
         return SUMMARY
@@ -66,8 +72,8 @@ def test_the_manifest_lists_what_a_run_wrote_and_overwrite_deletes_only_that(
     out = tmp_path / "out"
     monkeypatch.setattr(hd, "run_hemidisk", fake_run({"fields.vtu": b"v", "sub/a.npz": b"a"}))
     assert main([*FAST, "--out", str(out)]) == 0
-    assert read_manifest(out) == {"run.json", "run.toml", "status.json", "brainbulge.log",
-                                  "fields.vtu", "sub/a.npz"}
+    assert set(read_manifest(out)) == {"run.json", "run.toml", "status.json", "brainbulge.log",
+                                       "fields.vtu", "sub/a.npz"}
     assert not (out / LOCK_FILE).exists() and status(out)["status"] == "complete"
 
     (out / "sub" / "mine.txt").write_text("a user's file")  # refused, nothing deleted
@@ -127,7 +133,7 @@ def test_a_second_process_is_refused_and_a_dead_ones_lock_is_stale(tmp_path, cap
         assert main([*FAST, "--out", str(out)]) == 2
         line = one_line(capsys)
         assert "in use by another brainbulge run" in line and str(holder.pid) in line
-        assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]  # no status written
+        assert sorted(p.name for p in out.iterdir()) == [JOURNAL, LOCK_FILE]  # no status
     finally:
         holder.kill()
         holder.wait()
@@ -188,7 +194,8 @@ SLOW = ("import subprocess, sys, time\n"
         "import brainbulge.studies.hemidisk as hd\n"
         "from brainbulge.cli import main\n"
         "def slow(case, out, progress=False):\n"
-        "    (Path(out) / 'fields.png').write_bytes(b'png')\n"
+        "    from brainbulge.atomic import atomic_write_text\n"
+        "    atomic_write_text(Path(out) / 'fields.png', 'png')\n"
         "    child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'])\n"
         "    (Path(out) / 'child.pid').write_text(str(child.pid))\n"
         "    time.sleep(120)\n"
@@ -249,8 +256,8 @@ def test_a_study_folder_of_other_scenarios_is_refused_unless_overwrite(tmp_path,
     def fake(name, scenarios, out, scheduler, workers):
         for sc in scenarios:
             (out / sc["name"]).mkdir(exist_ok=True)
-            (out / sc["name"] / "summary.json").write_text("{}")
-        (out / "study.json").write_text("{}")
+            atomic_write_text(out / sc["name"] / "summary.json", "{}")
+        atomic_write_text(out / "study.json", "{}")
         calls.append(name)
         return len(scenarios)
 

@@ -14,6 +14,7 @@ import nibabel as nib
 import numpy as np
 import pytest
 
+from brainbulge.atomic import atomic_output, atomic_write_text
 from brainbulge.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -154,8 +155,9 @@ def _finished_run(folder: Path, command: str = "hemidisk", manifest: bool = True
 
     claimed = claim_output_dir(folder, overwrite=False)
     write_run_record(folder, {"command": command, command: {"alpha": 80.0}}, ["brainbulge"])
-    (folder / "summary.json").write_text('{"max_displacement": 0.17}\n')
-    (folder / "fields.vtu").write_bytes(bytes(range(256)))
+    atomic_write_text(folder / "summary.json", '{"max_displacement": 0.17}\n')
+    with atomic_output(folder / "fields.vtu") as tmp:
+        tmp.write_bytes(bytes(range(256)))
     mark_status(folder, "complete")
     claimed.release()
     if not manifest:  # written by a brainbulge without manifests
@@ -175,9 +177,9 @@ def _finished_study(folder: Path) -> None:
     claimed = claim_output_dir(folder, overwrite=False)
     write_run_record(folder, {"command": "study", "study": "hemidisk-sector",
                               "scenarios": scenarios}, ["brainbulge"])
-    (folder / "study.json").write_text('{"n_scenarios": 16}\n')
+    atomic_write_text(folder / "study.json", '{"n_scenarios": 16}\n')
     (folder / scenarios[0]["name"]).mkdir()
-    (folder / scenarios[0]["name"] / "summary.json").write_text('{"complete": true}\n')
+    atomic_write_text(folder / scenarios[0]["name"] / "summary.json", '{"complete": true}\n')
     mark_status(folder, "complete")
     claimed.release()
 

@@ -198,7 +198,10 @@ def _setup_logging(verbose: int) -> None:
 
 def add_log_file(out: Path) -> logging.Handler:
     """Also log (INFO and above) to ``out/brainbulge.log``."""
+    from brainbulge.atomic import note_written
+
     handler = logging.FileHandler(Path(out) / "brainbulge.log")
+    note_written(Path(out) / "brainbulge.log", tracked=False)  # it grows while the run goes on
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     log.addHandler(handler)
@@ -213,11 +216,12 @@ def progress_bar() -> bool:
 def start_run(args: argparse.Namespace, config: dict[str, Any], resume: bool = False) -> Path:
     """Claim ``--out`` (checked, created, locked; cleared only with ``--overwrite``), write the
     run record, mark it running, start the log file. Call only after every input is checked."""
-    from brainbulge.results.output_folder import claim_output_dir
+    from brainbulge.results.output_folder import claim_output_dir, config_paths
     from brainbulge.results.run_record import mark_status, write_run_record
 
+    inputs = [*config_paths(config), getattr(args, "config", None)]  # never deleted
     folder = claim_output_dir(args.out, overwrite=args.overwrite, resume=resume,
-                              config=config)
+                              config=config, inputs=inputs)
     _RUN.folder = folder
     out = folder.path
     write_run_record(out, config, None, files=folder.previous)

@@ -9,14 +9,22 @@ A brainbulge command *claims* its ``--out`` folder before writing anything into 
   exclusively (``os.link`` of a complete temporary file, so it is never half-written) with
   the owner's process id, host and start time. A lock whose process is gone (same host) is
   stale: it is removed with a warning. A second run into the same folder is refused;
-* ``--overwrite`` deletes only the files listed in the folder's manifest, never the current
-  folder or one of its ancestors, and never a file brainbulge did not write;
-* while the run goes on, the manifest (``run.json["files"]``: the paths, relative to the
-  folder, of every file a brainbulge run wrote there) is refreshed on every status change;
-  releasing the folder writes it a last time and removes the lock.
+* ``--overwrite`` deletes only the files listed in the folder's manifest that are as
+  brainbulge wrote them (same size and modification time), never an input of the command
+  (``--mesh``, ``--labels``, a run file...), the current folder or one of its ancestors. It is
+  all or nothing: the old files are first moved aside into one hidden folder, which is deleted
+  only once all of them are there; if one cannot be moved, those moved go back and the folder
+  is as it was;
+* while the run goes on, every file a brainbulge process writes into the folder (this one,
+  its Dask workers) is appended to the folder's journal (``.brainbulge.journal``) as it is
+  written, with its size and modification time; the manifest (``run.json["files"]``: path
+  relative to the folder -> ``[size, mtime_ns]``, or null for logs) is made from it on every
+  status change; releasing the folder writes it a last time and removes the journal and the
+  lock. A file that appears in the folder by other means (a notebook saved there, another
+  run's results in a subfolder) is never listed.
 
-A file counts as written by this run if it is new or changed (inode, size or modification
-time) since the folder was claimed; files of a resumed run's manifest stay listed.
+Files of a resumed run's manifest stay listed; the journal of a killed run counts as its
+manifest.
 """
 
 from __future__ import annotations
@@ -25,12 +33,15 @@ import errno
 import json
 import logging
 import os
+import shutil
 import socket
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+from brainbulge.atomic import JOURNAL
 from brainbulge.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -40,6 +51,7 @@ __all__ = [
     "OutputFolder",
     "check_out_path",
     "claim_output_dir",
+    "config_paths",
     "folder_files",
     "prepare_output_dir",
     "read_manifest",
@@ -56,8 +68,15 @@ RUN_MARKERS = ("run.json", "run.toml", "status.json", "study.json")
 RESUMABLE = ("study.json", "restart.npz")
 #: Folders claimed by this process (their manifests are refreshed by `refresh_manifest`).
 _CLAIMED: dict[Path, OutputFolder] = {}
+#: Prefix of the folder ``--overwrite`` moves the old files into before deleting them.
+ASIDE = ".brainbulge-old."
+#: Room kept for the names brainbulge writes inside ``--out`` (scenario folders of up to 100
+#: characters and their files) [characters]
+NAME_ROOM = 160
 
 Signature = tuple[int, int, int]
+#: A manifest: relative path -> (size, mtime_ns) as written, or None (a log, an old manifest)
+Manifest = dict[str, tuple[int, int] | None]
 
 
 # --------------------------------------------------------------------------- listing
@@ -66,7 +85,7 @@ Signature = tuple[int, int, int]
 def _is_temporary(name: str) -> bool:
     """Temporary files of brainbulge's atomic writes (``.NAME.XXXX.tmp[.EXT]``,
     ``NAME.tmp.npz``)."""
-    return name == LOCK_FILE or name.startswith(f"{LOCK_FILE}.") or (
+    return name in (LOCK_FILE, JOURNAL) or name.startswith(f"{LOCK_FILE}.") or (
         name.startswith(".") and (name.endswith(".tmp") or ".tmp." in name)
     ) or name.endswith(".tmp.npz")
 
@@ -80,7 +99,7 @@ def folder_files(path: Path) -> dict[str, Signature]:
     for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
         here = Path(dirpath)
         links = [d for d in dirnames if (here / d).is_symlink()]
-        dirnames[:] = [d for d in dirnames if d not in links]
+        dirnames[:] = [d for d in dirnames if d not in links and not d.startswith(ASIDE)]
         for name in (*filenames, *links):
             if _is_temporary(name):
                 continue
@@ -93,16 +112,56 @@ def folder_files(path: Path) -> dict[str, Signature]:
     return found
 
 
-def read_manifest(path: Path) -> set[str] | None:
-    """The files listed in ``path/run.json`` (``None`` if there is no such list)."""
+def read_manifest(path: Path) -> Manifest | None:
+    """The files listed in ``path/run.json`` and in a journal left by a killed run, as
+    `Manifest` (``None`` if there is neither). Lists of names (older runs) read as files
+    without signatures."""
+    path = Path(path)
     try:
-        record = json.loads((Path(path) / "run.json").read_text(encoding="utf-8"))
+        record = json.loads((path / "run.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return None
+        record = None
     files = record.get(MANIFEST_KEY) if isinstance(record, dict) else None
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+    manifest: Manifest | None = None
+    if isinstance(files, list) and all(isinstance(f, str) for f in files):
+        manifest = dict.fromkeys(files)
+    elif isinstance(files, dict):
+        manifest = {name: _signature(sig) for name, sig in files.items()}
+    journal = read_journal(path)
+    if journal:
+        manifest = {**(manifest or {}), **journal}
+    if manifest is None:
         return None
-    return {f for f in files if _safe_relative(f)}
+    return {f: sig for f, sig in manifest.items() if _safe_relative(f)}
+
+
+def _signature(value: Any) -> tuple[int, int] | None:
+    if (isinstance(value, list) and len(value) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+        return (value[0], value[1])
+    return None
+
+
+def read_journal(path: Path) -> Manifest:
+    """The files the journal of ``path`` lists (the last entry of each); {} if none."""
+    found: Manifest = {}
+    try:
+        lines = (Path(path) / JOURNAL).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return found
+    for line in lines:
+        try:
+            name, size, mtime = json.loads(line)
+        except (ValueError, TypeError):
+            continue  # a line cut short by a kill
+        if isinstance(name, str):
+            found[name] = _signature([size, mtime])
+    return found
+
+
+def _matches(sig: Signature, listed: tuple[int, int] | None) -> bool:
+    """A file (``sig``: inode, size, mtime_ns) is as brainbulge wrote it."""
+    return listed is None or tuple(sig[1:]) == tuple(listed)
 
 
 def _safe_relative(name: str) -> bool:
@@ -123,11 +182,23 @@ def _listing(names: list[str], limit: int = 3) -> str:
 
 
 def check_out_path(path: Path | str, overwrite: bool) -> Path:
-    """Refuse an ``--out`` that cannot be right, before anything is touched: empty, a file,
-    or (with ``overwrite``) the current folder or one of its ancestors."""
+    """Refuse an ``--out`` that cannot be right, before anything is touched: empty, a name
+    too long for the file system, a file, or (with ``overwrite``) the current folder or one of
+    its ancestors."""
     if str(path).strip() == "":
         raise InputError("--out is empty; give the name of a folder for the results")
     path = Path(path)
+    name_max, path_max = _name_limits(path)
+    long = [part for part in path.parts if len(os.fsencode(part)) > name_max]
+    if long:
+        raise InputError(f"--out: the name {long[0][:40]}... has {len(os.fsencode(long[0]))} "
+                         f"characters, more than the {name_max} the file system allows; choose "
+                         "a shorter --out")
+    full = len(os.fsencode(os.path.abspath(path)))
+    if full + NAME_ROOM > path_max:
+        raise InputError(f"--out is {full} characters long as a full path; the results need "
+                         f"{NAME_ROOM} more, and the file system allows {path_max}: choose a "
+                         "shorter --out")
     if path.exists() and not path.is_dir():
         raise InputError(f"output folder {path} exists and is a file; choose another --out")
     if overwrite and path.exists():
@@ -138,6 +209,17 @@ def check_out_path(path: Path | str, overwrite: bool) -> Path:
                 "home folder); choose a new folder for --out"
             )
     return path
+
+
+def _name_limits(path: Path) -> tuple[int, int]:
+    """The longest file name and path [bytes] where ``path`` would be created."""
+    here = Path(os.path.abspath(path))
+    while not here.exists() and here != here.parent:
+        here = here.parent
+    try:
+        return os.pathconf(here, "PC_NAME_MAX"), os.pathconf(here, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 255, 4096
 
 
 def _normalised(config: Any) -> Any:
@@ -197,7 +279,7 @@ def _check_same_run(path: Path, config: dict[str, Any] | None) -> None:
 
 
 def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] | None,
-             locked: bool = False) -> str:
+             locked: bool = False, inputs: frozenset[Path] = frozenset()) -> str:
     """What to do with ``path``: "fresh" (missing or empty), "resume" or "clear"; read-only.
 
     Raises `InputError` for every folder that must not be used."""
@@ -209,7 +291,8 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
         _check_lock(path)
     try:
         present = folder_files(path)
-        empty = not present and not any(p.name != LOCK_FILE for p in path.iterdir())
+        empty = not present and not any(
+            p.name not in (LOCK_FILE, JOURNAL) for p in path.iterdir())
     except OSError as exc:
         raise InputError(f"cannot read output folder {path}: {exc.strerror or exc}") from exc
     if empty:
@@ -239,31 +322,96 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
             f"output folder {path} is not empty and is not a brainbulge output (no run.json"
             " or study.json); refusing to delete it, choose another --out"
         )
-    foreign = sorted(f for f in present if f not in manifest)
+    foreign = sorted(f for f, sig in present.items()
+                     if (f not in manifest or not _matches(sig, manifest[f]))
+                     and not _is_input(path / f, inputs))
     if foreign:
         raise InputError(
-            f"output folder {path} holds {len(foreign)} file(s) brainbulge did not write "
-            f"({_listing(foreign)}; files of a killed run are not listed either); --overwrite "
-            "never deletes those: move them away or choose another --out"
+            f"output folder {path} holds {len(foreign)} file(s) brainbulge did not write or "
+            f"that changed since ({_listing(foreign)}); --overwrite never deletes those: move "
+            "them away or choose another --out"
         )
     return "clear"
 
 
-def _clear(path: Path) -> None:
-    """Delete the files of ``path``'s manifest, then the subfolders left empty."""
-    manifest = read_manifest(path) or set()
+def _is_input(target: Path, inputs: frozenset[Path]) -> bool:
+    """``target`` is (or lies in) one of the command's input files or folders."""
+    if not inputs:
+        return False
+    try:
+        real = target.resolve()
+    except OSError:
+        return False
+    return real in inputs or any(p in inputs for p in real.parents)
+
+
+def resolve_inputs(paths: Any) -> frozenset[Path]:
+    """The existing files among ``paths`` (None and missing ones left out), resolved (links
+    followed); for a folder, its ``brain.npz`` (a mesh folder is read through it)."""
+    found = set()
+    for p in paths:
+        if not isinstance(p, str | os.PathLike) or str(p).strip() == "":
+            continue
+        try:
+            real = Path(p).expanduser().resolve()
+            if real.is_dir():
+                real = real / "brain.npz"
+            if real.is_file():
+                found.add(real)
+        except (OSError, RuntimeError, ValueError):
+            continue
+    return frozenset(found)
+
+
+def config_paths(config: Any) -> list[str]:
+    """Every text value of ``config`` (nested tables and lists): the candidates for the
+    files a command reads (`resolve_inputs` keeps those that exist)."""
+    if isinstance(config, dict):
+        return [p for v in config.values() for p in config_paths(v)]
+    if isinstance(config, list | tuple):
+        return [p for v in config for p in config_paths(v)]
+    return [config] if isinstance(config, str | os.PathLike) else []
+
+
+def _clear(path: Path, manifest: Manifest, inputs: frozenset[Path] = frozenset()) -> Manifest:
+    """Delete the files of ``manifest`` in ``path`` (not the command's ``inputs``), all or
+    nothing: each is moved into one hidden folder, deleted once all are there; if one cannot
+    be moved, those moved go back and `InputError` says which and what to do. Return the
+    entries kept (inputs); the subfolders left empty are removed."""
     root = path.resolve()
+    kept: Manifest = {}
+    aside = Path(tempfile.mkdtemp(prefix=ASIDE, dir=path))
+    moved: list[str] = []
     folders = set()
-    for name in sorted(manifest):
-        target = path / name
-        if root not in target.parent.resolve().parents and target.parent.resolve() != root:
-            continue  # reached through a link out of the folder: not ours to delete
-        if target.is_symlink() or target.is_file():
-            target.unlink()
-        folders.update(p for p in target.relative_to(path).parents if str(p) != ".")
+    try:
+        for name in sorted(manifest):
+            target = path / name
+            if not (target.is_symlink() or target.is_file()):
+                continue
+            if root not in target.parent.resolve().parents and target.parent.resolve() != root:
+                continue  # reached through a link out of the folder: not ours to delete
+            if _is_input(target, inputs):
+                kept[name] = manifest[name]
+                continue
+            (aside / name).parent.mkdir(parents=True, exist_ok=True)
+            os.rename(target, aside / name)
+            moved.append(name)
+            folders.update(p for p in PurePosixPath(name).parents if str(p) != ".")
+    except OSError as exc:
+        for name in reversed(moved):
+            with _ignored(OSError):
+                os.rename(aside / name, path / name)
+        shutil.rmtree(aside, ignore_errors=True)
+        raise InputError(
+            f"--overwrite cannot remove {target} of the earlier run "
+            f"({(exc.strerror or str(exc)).lower()}), so nothing was deleted; make it "
+            "removable (write permission on its folder, chattr -i) or choose another --out"
+        ) from None
+    shutil.rmtree(aside, ignore_errors=True)
     for sub in sorted(folders, key=lambda p: len(p.parts), reverse=True):
         with _ignored(OSError):
             (path / sub).rmdir()  # only if empty
+    return kept
 
 
 class _ignored:
@@ -377,15 +525,22 @@ class OutputFolder:
 
     path: Path
     created: bool
-    previous: set[str] = field(default_factory=set)
-    snapshot: dict[str, Signature] = field(default_factory=dict)
+    previous: Manifest = field(default_factory=dict)
     lock: Path | None = None
+    journal: bool = False  # True once this process's journal is started
+
+    def manifest(self) -> Manifest:
+        """The files brainbulge wrote here that are still as written: those of the journal
+        and of the earlier manifest (resume, kept inputs), with ``run.json``."""
+        now = folder_files(self.path) if self.path.is_dir() else {}
+        listed = {**self.previous, **read_journal(self.path)}
+        found = {f: sig for f, sig in listed.items() if f in now and _matches(now[f], sig)}
+        return {**found, "run.json": None}
 
     def written(self) -> set[str]:
-        """Files of the earlier manifest plus those new or changed since the claim."""
-        now = folder_files(self.path) if self.path.is_dir() else {}
-        fresh = {f for f, sig in now.items() if self.snapshot.get(f) != sig}
-        return {f for f in self.previous if f in now} | fresh
+        """The names of `manifest` that this run wrote (not those of the earlier manifest)."""
+        journal = read_journal(self.path)
+        return {f for f in self.manifest() if f in journal}
 
     def record_files(self) -> None:
         """Write the manifest into ``run.json`` (if the run record exists)."""
@@ -396,13 +551,14 @@ class OutputFolder:
             record = json.loads(run_json.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return
-        record[MANIFEST_KEY] = sorted(self.written() | {"run.json"})
+        record[MANIFEST_KEY] = {f: None if sig is None else list(sig)
+                                for f, sig in sorted(self.manifest().items())}
         atomic_write_json(run_json, record)
 
     def drop_empty_files(self) -> list[str]:
         """Delete the empty files this run created (e.g. left by a full disk)."""
         dropped = []
-        for name in sorted(self.written() - self.previous):
+        for name in sorted(self.written() - set(self.previous)):
             target = self.path / name
             with _ignored(OSError):
                 if target.is_file() and not target.is_symlink() and target.stat().st_size == 0:
@@ -411,10 +567,14 @@ class OutputFolder:
         return dropped
 
     def release(self) -> None:
-        """Refresh the manifest (best effort) and remove the lock."""
+        """Refresh the manifest (best effort) and remove the journal and the lock; if the
+        manifest cannot be written (a full disk) the journal stays: it lists the files."""
         _CLAIMED.pop(self.path.resolve(), None)
         try:
-            self.record_files()
+            if self.journal:  # else the claim failed: the folder's record is left as it was
+                self.record_files()
+                (self.path / JOURNAL).unlink(missing_ok=True)
+                self.journal = False
         except OSError as exc:  # e.g. the disk is full: the lock still goes
             log.info("could not update the file list in %s: %s", self.path / "run.json",
                         exc.strerror or exc)
@@ -425,16 +585,18 @@ class OutputFolder:
 
 def claim_output_dir(
     path: Path | str, overwrite: bool, resume: bool = False,
-    config: dict[str, Any] | None = None,
+    config: dict[str, Any] | None = None, inputs: Any = (),
 ) -> OutputFolder:
     """Check, create, lock and (``overwrite``) clear the output folder ``path``.
 
     Refused with `InputError` (nothing touched): see the module docstring. On ``resume``
     the folder must hold ``study.json`` or ``restart.npz`` and, if it has a ``run.toml``,
-    the same ``config``. Release the returned folder with `OutputFolder.release`.
+    the same ``config``. ``inputs`` (paths the command reads) are never deleted. Release the
+    returned folder with `OutputFolder.release`.
     """
     path = check_out_path(path, overwrite)
-    _inspect(path, overwrite, resume, config)  # everything read-only first
+    protected = resolve_inputs(inputs)
+    _inspect(path, overwrite, resume, config, inputs=protected)  # everything read-only first
     created = not path.exists()
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -450,16 +612,35 @@ def claim_output_dir(
         raise
     folder = OutputFolder(path, created, lock=lock)
     try:
-        action = _inspect(path, overwrite, resume, config, locked=True)  # again, under the lock
+        action = _inspect(path, overwrite, resume, config, locked=True, inputs=protected)
+        for old in path.glob(f"{ASIDE}*"):  # left by an --overwrite that was killed
+            shutil.rmtree(old, ignore_errors=True)
+        manifest = read_manifest(path) or {}
         if action == "clear":
-            _clear(path)
-        folder.previous = (read_manifest(path) or set()) if action == "resume" else set()
-        folder.snapshot = folder_files(path)
+            folder.previous = _clear(path, manifest, protected)
+        elif action == "resume":
+            now = folder_files(path)
+            folder.previous = {f: sig for f, sig in manifest.items()
+                               if f in now and _matches(now[f], sig)}
+        _start_journal(path)
+        folder.journal = True
     except BaseException:
         folder.release()
         raise
     _CLAIMED[path.resolve()] = folder
     return folder
+
+
+def _start_journal(path: Path) -> None:
+    """An empty journal in ``path`` (replacing that of a killed run, already read)."""
+    tmp = path / f"{JOURNAL}.{os.getpid()}.tmp"
+    try:
+        tmp.write_bytes(b"")
+        os.replace(tmp, path / JOURNAL)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"cannot write into output folder {path}: {exc.strerror or exc}; "
+                         "choose a writable --out") from exc
 
 
 def refresh_manifest(path: Path) -> None:
@@ -485,6 +666,7 @@ def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Pat
     ``study.json`` or ``restart.npz``, reused as is)."""
     folder = claim_output_dir(path, overwrite, resume)
     _CLAIMED.pop(folder.path.resolve(), None)
+    (folder.path / JOURNAL).unlink(missing_ok=True)
     if folder.lock is not None:
         folder.lock.unlink(missing_ok=True)
     return folder.path
