@@ -13,6 +13,11 @@ from typing import Any
 from brainbulge.errors import InputError
 
 FLAPS = ("frontal", "left", "right", "custom")
+#: the ``[mesh]`` table of the run file: key -> the option it records
+CONFIG_OPTIONS = {"labels": "--labels", "label_map": "--label-map", "tets": "--tets",
+                  "brain_volume_ml": "--brain-volume", "flap": "--flap",
+                  "flap_centre_mm": "--flap-centre", "flap_diameter_mm": "--flap-diameter",
+                  "base_z_mm": "--base-z", "csf_layer_mm": "--csf-layer", "refine": "--refine"}
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -72,11 +77,10 @@ def run(args: argparse.Namespace) -> int:
     image = load_tissue_image(args.labels, args.label_map) if args.labels else None
     checks.mesh_tets(args.tets, args.refine, template=args.labels is None,
                      labelled_ml=sum(image.volumes_ml().values()) if image else None)
-    config = {"command": "mesh", "mesh": {
-        "labels": args.labels, "label_map": args.label_map, "tets": args.tets,
-        "brain_volume_ml": args.brain_volume, "flap": args.flap,
-        "flap_centre_mm": args.flap_centre, "flap_diameter_mm": args.flap_diameter,
-        "base_z_mm": args.base_z, "csf_layer_mm": args.csf_layer, "refine": args.refine}}
+    config = {"command": "mesh", "mesh": {key: getattr(args, opt[2:].replace("-", "_"))
+                                          for key, opt in CONFIG_OPTIONS.items()}}
+    if args.labels is None:  # the template's labels are built in
+        config["mesh"]["label_map"] = None
     out = start_run(args, config)
     mesh = build_brain_mesh(
         image, target_tets=args.tets, brain_volume_ml=args.brain_volume,

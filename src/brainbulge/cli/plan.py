@@ -23,6 +23,13 @@ from brainbulge.cli import add_output_options, finish_run, positive_float, requi
 DIAMETER_RANGE_MM = (40.0, 200.0)
 #: candidate centres at most
 MAX_CENTRES = 100
+#: the ``[plan]`` table of the run file: key -> the option it records
+CONFIG_OPTIONS = {"swell": "--swell", "swelling": "--swelling", "steps": "--steps",
+                  "tolerance": "--tolerance", "linear_solver": "--linear-solver",
+                  "edge_radius_mm": "--skull-edge-radius", "mesh": "--mesh", "tets": "--tets",
+                  "labels": "--labels", "label_map": "--label-map",
+                  "diameters_mm": "--diameters", "centres_mm": "--centre",
+                  "n_centres": "--centres", "strain_threshold": "--threshold"}
 
 
 def add_parser(sub: Any) -> None:
