@@ -28,6 +28,7 @@ allows: a reader never sees half a file, even after a crash.
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import subprocess
@@ -206,6 +207,16 @@ def mark_status(out_dir: Path, status: str, message: str = "") -> Path:
         "message": " ".join(str(message).split()),
         "time": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    path = atomic_write_json(Path(out_dir) / "status.json", record)
+    path = Path(out_dir) / "status.json"
+    try:
+        atomic_write_json(path, record)
+    except OSError:
+        if not path.is_file():
+            raise
+        # no room for a new file (no free inode, a full disk): the status still has to
+        # change, so it is written over the old one, in the blocks it already has
+        with open(path, "r+b") as fh:
+            fh.write((json.dumps(record, indent=2) + "\n").encode("utf-8"))
+            fh.truncate()
     refresh_manifest(Path(out_dir))
     return path

@@ -387,6 +387,28 @@ def _finish(study: _Study, bar: Any, i: int, outcome: dict[str, Any]) -> None:
                 len(study.status) - study.status.count("pending"), len(study.status), n_failed)
 
 
+#: the environment of local workers beyond thread counts: only their errors reach the terminal
+WORKER_QUIET = {"DASK_LOGGING__DISTRIBUTED": "error"}
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while worker processes start: they inherit it, so a Ctrl-C in the
+    terminal (sent to every process of the job) stops only this process, which ends them
+    without their tracebacks."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 @contextlib.contextmanager
 def local_cluster(n_workers: int | None = None) -> Iterator[str]:
     """A `distributed.LocalCluster` of ``n_workers`` (default 2) worker processes, one
@@ -405,13 +427,22 @@ def local_cluster(n_workers: int | None = None) -> Iterator[str]:
         raise InputError(f"n_workers must be at least 1, not {n_workers}")
     n_workers = n_workers or 2
     env = worker_env(n_workers)
-    with _worker_environ(env):
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", env=env)
-    with cluster:
-        if importlib.util.find_spec("bokeh"):
-            logger.info("Dask dashboard: %s", cluster.dashboard_link)
-        yield cluster.scheduler_address
+    with _worker_environ({**env, **WORKER_QUIET}), _sigint_ignored():  # Ctrl-C stops
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1,  # this process, which
+                               processes=True, dashboard_address=":0", env=env)  # ends them
+    distributed_log = logging.getLogger("distributed")
+    level = distributed_log.level
+    try:
+        with cluster:
+            if importlib.util.find_spec("bokeh"):
+                logger.info("Dask dashboard: %s", cluster.dashboard_link)
+            try:
+                yield cluster.scheduler_address
+            except BaseException:  # interrupted: the workers' shutdown is no news
+                distributed_log.setLevel(logging.CRITICAL)
+                raise
+    finally:
+        distributed_log.setLevel(level)
 
 
 @contextlib.contextmanager
