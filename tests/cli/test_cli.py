@@ -271,18 +271,26 @@ def test_the_table_is_large() -> None:
     assert len(BAD) >= 60
 
 
-def test_a_listening_scheduler_address_passes_the_probe() -> None:
+def test_a_dask_scheduler_passes_the_probe_and_another_server_does_not(monkeypatch) -> None:
+    from distributed import LocalCluster
+
     from brainbulge.cli import checks
     from brainbulge.errors import InputError
 
-    with socket.socket() as server:
+    monkeypatch.setattr(checks, "SCHEDULER_PROBE_S", 1.0)
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://",
+                      dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        checks.scheduler(address)
+        checks.scheduler(address.removeprefix("tcp://").replace("127.0.0.1", "localhost"))
+    with pytest.raises(InputError, match="refused"):
+        checks.scheduler(address)
+    with socket.socket() as server:  # accepts, says nothing (as a stuck or foreign server)
         server.bind(("127.0.0.1", 0))
         server.listen()
         port = server.getsockname()[1]
-        checks.scheduler(f"tcp://127.0.0.1:{port}")
-        checks.scheduler(f"localhost:{port}")
-    with pytest.raises(InputError, match="refused"):
-        checks.scheduler(f"tcp://127.0.0.1:{port}")
+        with pytest.raises(InputError, match="not a Dask scheduler"):
+            checks.scheduler(f"tcp://127.0.0.1:{port}")
     checks.scheduler("inproc://127.0.0.1:1")  # in-process addresses are not probed
 
 

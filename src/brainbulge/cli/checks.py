@@ -294,3 +294,30 @@ def scheduler(address: str | None) -> None:
             f"--scheduler {address}: no Dask scheduler reachable there ({reason.lower()}); "
             "start one (`dask scheduler`) or correct the address, or leave --scheduler out "
             "for a local cluster") from None
+    reply = _identity(address if protocol else f"tcp://{address}")
+    if not (isinstance(reply, dict) and reply.get("type") == "Scheduler"):
+        raise InputError(
+            f"--scheduler {address}: something listens there, but it is not a Dask scheduler "
+            f"(no Dask handshake in {SCHEDULER_PROBE_S:g} s); give the scheduler's address "
+            "(`dask scheduler` prints it), or leave --scheduler out for a local cluster")
+
+
+def _identity(address: str) -> Any:
+    """The Dask ``identity`` reply of the server at ``address``, within
+    `SCHEDULER_PROBE_S` seconds in all; None if there is none (another kind of server)."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def ask() -> Any:
+        comm = await connect(address, timeout=SCHEDULER_PROBE_S)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        return asyncio.run(asyncio.wait_for(ask(), SCHEDULER_PROBE_S))
+    except Exception:  # noqa: BLE001 - a timeout, a refused or garbled handshake: not Dask
+        return None

@@ -427,9 +427,10 @@ def local_cluster(n_workers: int | None = None) -> Iterator[str]:
         raise InputError(f"n_workers must be at least 1, not {n_workers}")
     n_workers = n_workers or 2
     env = worker_env(n_workers)
-    with _worker_environ({**env, **WORKER_QUIET}), _sigint_ignored():  # Ctrl-C stops
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1,  # this process, which
-                               processes=True, dashboard_address=":0", env=env)  # ends them
+    # SIGINT ignored by the workers: a Ctrl-C stops this process, which ends them
+    with _worker_environ({**env, **WORKER_QUIET}), _sigint_ignored():
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", env=env)
     distributed_log = logging.getLogger("distributed")
     level = distributed_log.level
     try:
