@@ -353,6 +353,27 @@ def positive_float(name: str) -> Callable[[str], float]:
     return parse
 
 
+def whole_number(name: str) -> Callable[[str], int]:
+    """argparse type: a whole number, also written as ``1e5`` or ``100_000`` (as the help's
+    defaults are), with a one-line error naming the option."""
+
+    def parse(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            pass
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{name} must be a whole number, got {text!r}") from None
+        if not v.is_integer():
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text}")
+        return int(v)
+
+    return parse
+
+
 def add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument("--out", default=default_out, help=f"output folder (default {default_out})")
     p.add_argument(

@@ -205,6 +205,10 @@ def brain_case(config: dict[str, Any]) -> Any:
     case = case_from_dict(config)
     number("steps", case.steps, *STEPS, integer=True)
     flap_centre(case.flap_centre_mm)
+    if case.fibres is not None:
+        from brainbulge.geometry.brain.fibres import check_fibres
+
+        check_fibres(case.fibres)  # its header: shape and size, not its data
     if case.mesh is None:
         labelled = None if case.labels is None else labelled_ml(case.labels, case.label_map)
         mesh_tets(case.tets, case.refine, template=case.labels is None, labelled_ml=labelled)
@@ -223,13 +227,15 @@ def mesh_tets(tets: Any, refine: Any, template: bool, labelled_ml: float | None 
     ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement, of a
     segmentation with ``labelled_ml`` ml of tissue at least `LABELS_TETS_PER_ML` per ml."""
     number("--refine", refine, 0, 3, integer=True)
-    number("--tets", tets, *MESH_TETS, integer=True)
     made = f"--tets {tets}" + (f" / 8^{refine}" if refine else "")
-    if template and tets / 8**refine < TEMPLATE_TETS_MIN:
+    whole = isinstance(tets, int) and not isinstance(tets, bool)
+    if template and whole and tets / 8**refine < TEMPLATE_TETS_MIN:
         raise InputError(
             f"{made} is below {TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template "
             f"that coarse (it retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} "
             "or more")
+    lo = TEMPLATE_TETS_MIN * 8**refine if template else MESH_TETS[0]  # the range that holds
+    number("--tets", tets, min(lo, MESH_TETS[1]), MESH_TETS[1], integer=True)
     if labelled_ml is None:
         return
     least, safe = (math.ceil(rate * labelled_ml) * 8**refine for rate in LABELS_TETS_PER_ML)

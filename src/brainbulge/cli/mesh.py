@@ -22,7 +22,7 @@ CONFIG_OPTIONS = {"labels": "--labels", "label_map": "--label-map", "tets": "--t
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register the ``mesh`` subcommand."""
-    from brainbulge.cli import add_output_options, positive_float
+    from brainbulge.cli import add_output_options, positive_float, whole_number
 
     p = subparsers.add_parser(
         "mesh", help="labelled tet mesh of a brain from MRI labels", description=__doc__
@@ -35,7 +35,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         '{"gray": [codes], "white": [...], "csf": [...], "cerebellum": [...], '
         '"brainstem": [...]} (default freesurfer)',
     )
-    p.add_argument("--tets", type=int, default=100_000, help="about how many tets (default 1e5)")
+    p.add_argument("--tets", type=whole_number("--tets"), default=100_000, help="about how many tets (default 1e5)")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
                    metavar="ML", help="scale to this intracranial volume [ml] (paper: 1108)")
     p.add_argument("--flap", choices=FLAPS, default=None,

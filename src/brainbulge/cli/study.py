@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run
+from brainbulge.cli import add_output_options, finish_run, start_run, whole_number
 from brainbulge.errors import InputError, StudyIncomplete
 from brainbulge.studies.suites import STUDIES
 
@@ -31,7 +31,7 @@ def add_parser(sub: Any) -> None:
                    help="element size on the edge-exclusion circles [units of R] (default h/10)")
     p.add_argument("--skull", choices=("paper", "rigid"), default="paper",
                    help="2D skull model (hemidisk studies): the paper's arc or a rigid shell")
-    p.add_argument("--tets", type=int, default=30_000,
+    p.add_argument("--tets", type=whole_number("--tets"), default=30_000,
                    help="brain mesh size in tets (craniectomy study)")
     p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
     p.add_argument("--swelling", type=float, default=1.1, help="white-matter Js (craniectomy)")
