@@ -57,6 +57,7 @@ import re
 import sys
 import traceback
 import uuid
+import zipfile
 from collections.abc import Callable, Iterator, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
@@ -172,10 +173,32 @@ def stopped_summary(scenario_dir: Path) -> dict[str, Any] | None:
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 
-def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any]) -> dict | None:
-    """The stored summary if the scenario finished before with the same parameters."""
+def _readable(path: Path) -> bool:
+    """``path`` is a complete file: an ``.npz`` whose members all pass their checksums, a
+    ``.json`` that parses, anything else not empty."""
+    try:
+        if path.suffix == ".npz":
+            with zipfile.ZipFile(path) as archive:
+                return archive.testzip() is None
+        if path.suffix == ".json":
+            json.loads(path.read_text(encoding="utf-8"))
+            return True
+        return path.stat().st_size > 0
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return False
+
+
+def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any],
+                      outputs: tuple[str, ...] = ()) -> dict | None:
+    """The stored summary if the scenario finished before with the same parameters and its
+    ``outputs`` (files the study reads afterwards) are all there and readable."""
     summary = _read_json(scenario_dir / SUMMARY_FILE)
     if not isinstance(summary, dict) or summary.get("complete") is not True:
+        return None
+    broken = [name for name in outputs if not _readable(scenario_dir / name)]
+    if broken:
+        logger.warning("scenario %s: %s missing or unreadable; recomputing it",
+                       scenario_json["name"], ", ".join(broken))
         return None
     stored = _read_json(scenario_dir / SCENARIO_FILE)
     if stored is not None and stored != scenario_json:
@@ -209,9 +232,11 @@ def _worker_environ(env: Mapping[str, str]) -> Iterator[None]:
 class _Study:
     """Bookkeeping of one `run_study` call: records, statuses and ``study.json``."""
 
-    def __init__(self, scenarios: list[dict[str, Any]], out_dir: Path) -> None:
+    def __init__(self, scenarios: list[dict[str, Any]], out_dir: Path,
+                 outputs: tuple[str, ...] = ()) -> None:
         self.scenarios = scenarios
         self.out_dir = out_dir
+        self.outputs = outputs
         self.results: list[dict[str, Any] | None] = [None] * len(scenarios)
         self.status = ["pending"] * len(scenarios)
         self.resumed = [False] * len(scenarios)
@@ -225,7 +250,7 @@ class _Study:
         pending = []
         for i, scenario in enumerate(self.scenarios):
             folder = self.scenario_dir(i)
-            summary = _finished_summary(folder, scenario)
+            summary = _finished_summary(folder, scenario, self.outputs)
             if summary is not None:
                 self.results[i], self.status[i], self.resumed[i] = summary, "complete", True
                 continue
@@ -291,6 +316,7 @@ def run_study(
     n_workers: int | None = None,
     progress: bool = True,
     cost: Callable[[dict[str, Any]], float] | None = None,
+    outputs: tuple[str, ...] = (),
 ) -> list[dict[str, Any]]:
     """Run ``task(scenario, out_dir / name)`` for every scenario; return the summaries in input
     order.
@@ -326,6 +352,10 @@ def run_study(
         scenarios start in order of decreasing cost (Dask task priorities), so that the
         longest do not start last and leave one worker busy while the others idle; serial
         runs keep the input order.
+    outputs
+        Files of a scenario's folder that the caller reads afterwards (e.g. ``fields.npz``
+        for figures): a scenario finished before whose outputs are missing or unreadable
+        (truncated, a failed checksum) is run again.
 
     Raises
     ------
@@ -342,7 +372,7 @@ def run_study(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
 
-    study = _Study(normalised, out_dir)
+    study = _Study(normalised, out_dir, tuple(outputs))
     pending = study.load_finished()
     study.write()
     if len(pending) < len(scenarios):
