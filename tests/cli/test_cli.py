@@ -111,7 +111,7 @@ BAD = [
     (["mesh", "--tets", "5000"], "below 25,000"),
     (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
     (["brain", "--tets", "10000"], "give --tets 25000 or more"),
-    (["mesh", "--tets", "100000000"], "[1,000, 5,000,000]"),
+    (["mesh", "--tets", "100000000"], "[25,000, 5,000,000]"),
     (["mesh", "--refine", "7"], "--refine"),
     (["mesh", "--label-map", "m.json"], "--labels"),
     (["mesh", "--flap", "custom"], "flap-centre"),
@@ -142,6 +142,16 @@ BAD = [
     (["study", "hemidisk-sector", "--out", "{run}"], "--overwrite"),
     (["study", "hemidisk-disk", "--out", "{study}"], "'hemidisk-sector'"),
     (["study", "hemidisk-sector", "--alphas", "20", "--out", "{study}"], "16 scenarios, not 8"),
+    # run files are closed: a misspelt table or option is named, never ignored
+    (["run", "{toml:alpah = 70.0}"], "unknown option alpah in [hemidisk]; did you mean 'alpha'"),
+    (["run", "{toml:alpha = 70.0\n[caes]}"], "unknown table [caes]; did you mean 'case'?"),
+    (["run", "{brain_toml:flaps = 'left'}"], "did you mean 'flap'?"),
+    # checked before --out is claimed, however cheap or costly the check
+    (["study", "hemidisk-sector", "--alphas", "20", "20"], "repeats a value"),
+    (["brain", "--fibres", "{cube_labels}"], "expected (nx, ny, nz, 3)"),
+    (["brain", "--fibres", "{text_file}"], "cannot read fibre image"),
+    (["hemidisk", "--out", "{tmp}/" + "x" * 300], "choose a shorter --out"),
+    (["mesh", "--tets", "1.5"], "--tets must be a whole number"),
 ]
 
 #: exit code of each case: 2 (bad input) unless listed
