@@ -35,7 +35,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         '{"gray": [codes], "white": [...], "csf": [...], "cerebellum": [...], '
         '"brainstem": [...]} (default freesurfer)',
     )
-    p.add_argument("--tets", type=whole_number("--tets"), default=100_000, help="about how many tets (default 1e5)")
+    p.add_argument("--tets", type=whole_number("--tets"), default=100_000,
+                   help="about how many tets (default 1e5)")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
                    metavar="ML", help="scale to this intracranial volume [ml] (paper: 1108)")
     p.add_argument("--flap", choices=FLAPS, default=None,
