@@ -243,6 +243,24 @@ QUICK = ("import sys\n"
          "sys.exit(main(sys.argv[1:]))\n")
 
 
+def test_nohup_keeps_a_run_going_when_the_terminal_closes(tmp_path) -> None:
+    out = tmp_path / "out"
+    run = subprocess.Popen([sys.executable, "-c", SLOW, *FAST, "--out", str(out)], env=ENV,
+                           stderr=subprocess.PIPE, text=True,
+                           preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+    try:
+        for _ in range(600):
+            if (out / "child.pid").is_file() and (out / "child.pid").read_text():
+                break
+            time.sleep(0.1)
+        run.send_signal(signal.SIGHUP)  # ignored, as under nohup
+        time.sleep(1.0)
+        assert run.poll() is None and status(out)["status"] == "running"
+    finally:
+        run.terminate()
+        run.communicate(timeout=60)
+
+
 def test_a_closed_pipe_or_a_full_stdout_does_not_fail_a_run(tmp_path) -> None:
     out = tmp_path / "out"
     run = subprocess.Popen([sys.executable, "-c", QUICK, *FAST, "--out", str(out)], env=ENV,

@@ -246,6 +246,20 @@ def test_run_files_of_studies_meshes_plans_and_the_demo_run(tmp_path, monkeypatc
                                               **demo_plan(True)})))
     assert main(["run", str(toml)]) == 0 and seen[-1] is True
 
+    import brainbulge.cli.plan as plan
+    import brainbulge.cli.reproduce as reproduce
+
+    monkeypatch.setattr(plan, "run_command", lambda args: seen.append(
+        (args.swell, args.diameters, args.centre, args.tets)) or 0)
+    toml.write_text('command = "plan"\n[plan]\nswell = "left"\ntets = 30000\n'
+                    "diameters_mm = [80.0, 100.0]\ncentres_mm = [[-60, 0, 50], [-50, 10, 60]]\n")
+    assert main(["run", str(toml)]) == 0
+    assert seen[-1] == ("left", [80.0, 100.0], [[-60.0, 0.0, 50.0], [-50.0, 10.0, 60.0]], 30000)
+    monkeypatch.setattr(reproduce, "run_command", lambda args: seen.append(
+        (args.tets, args.fix)) or 0)
+    toml.write_text('command = "reproduce"\ntets = 30000\nfix = "inferior"\n')
+    assert main(["run", str(toml)]) == 0 and seen[-1] == (30000, "inferior")
+
 
 def test_a_bad_value_in_a_run_file_is_one_line_naming_the_file(tmp_path, capsys) -> None:
     toml = tmp_path / "mesh.toml"

@@ -190,10 +190,11 @@ def _raise_terminated(signum: int, frame: Any) -> None:
 
 
 def _on_signal(signum: int, handler: Any) -> Any:
-    """Install ``handler`` for ``signum`` (main thread only); return the previous one."""
+    """Install ``handler`` for ``signum`` (main thread only); return the previous one. A
+    signal ignored by whoever started brainbulge (``nohup`` ignores SIGHUP) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         return None
-    if handler is None:
+    if handler is None or signal.getsignal(signum) is signal.SIG_IGN:
         return None
     return signal.signal(signum, handler)
 
