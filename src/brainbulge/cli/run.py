@@ -102,8 +102,13 @@ def run_command(args: argparse.Namespace) -> int:
             f"{args.config}: 'command' must be one of {', '.join(COMMANDS)}, got {command!r}"
         )
     check_keys(config, schema(command, config), str(args.config))
+    from brainbulge.cli import checks
+
+    if args.workers is not None:
+        checks.number("--workers", args.workers, 1, 256, integer=True)
+    if command == "study":  # the other commands check --scheduler themselves
+        checks.scheduler(args.scheduler)
     if command in ("hemidisk", "brain"):
-        from brainbulge.cli import checks
         from brainbulge.model.problem import case_options
 
         table = case_options(config, command, str(args.config))
