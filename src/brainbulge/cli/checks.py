@@ -11,6 +11,7 @@ import logging
 import math
 import re
 import socket
+import threading
 import types
 import typing
 from pathlib import Path
@@ -300,6 +301,8 @@ def scheduler(address: str | None) -> None:
             f"--scheduler {address}: no Dask scheduler reachable there ({reason.lower()}); "
             "start one (`dask scheduler`) or correct the address, or leave --scheduler out "
             "for a local cluster") from None
+    if protocol not in ("", "tcp"):
+        return  # a handshake over TLS or websockets needs the cluster's security settings
     reply = _identity(address if protocol else f"tcp://{address}")
     if not (isinstance(reply, dict) and reply.get("type") == "Scheduler"):
         raise InputError(
@@ -323,7 +326,14 @@ def _identity(address: str) -> Any:
         finally:
             comm.abort()
 
-    try:
-        return asyncio.run(asyncio.wait_for(ask(), SCHEDULER_PROBE_S))
-    except Exception:  # noqa: BLE001 - a timeout, a refused or garbled handshake: not Dask
-        return None
+    def probe(found: list[Any]) -> None:  # in its own thread: the caller may run a loop
+        try:
+            found.append(asyncio.run(asyncio.wait_for(ask(), SCHEDULER_PROBE_S)))
+        except Exception:  # noqa: BLE001 - a timeout, a refused or garbled handshake
+            pass
+
+    found: list[Any] = []
+    thread = threading.Thread(target=probe, args=(found,), daemon=True)
+    thread.start()
+    thread.join(SCHEDULER_PROBE_S + 1.0)
+    return found[0] if found else None
