@@ -178,6 +178,14 @@ def test_disk_full_or_read_only_is_one_line_and_a_true_status(tmp_path, monkeypa
     assert not (out / LOCK_FILE).exists()
 
 
+def test_an_unexpected_exit_still_leaves_a_true_status(tmp_path, monkeypatch) -> None:
+    out = tmp_path / "out"
+    monkeypatch.setattr(hd, "run_hemidisk", fake_run({"fields.vtu": b"v"}, SystemExit(3)))
+    with pytest.raises(SystemExit):
+        main([*FAST, "--out", str(out)])
+    assert status(out)["status"] == "failed" and not (out / LOCK_FILE).exists()
+
+
 def test_an_interruption_says_truthfully_what_is_kept(tmp_path, monkeypatch, capsys) -> None:
     out = tmp_path / "out"
     monkeypatch.setattr(hd, "run_hemidisk", fake_run({}, KeyboardInterrupt()))

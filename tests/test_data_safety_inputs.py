@@ -101,6 +101,17 @@ def test_an_input_inside_out_is_never_deleted_by_overwrite(mesh_folder, monkeypa
     assert (mesh_folder / "brain.npz").read_bytes() == b"the mesh"
 
 
+def test_a_kept_input_is_not_reported_as_a_result(mesh_folder, monkeypatch, capsys) -> None:
+    def interrupted(case, out, progress=False):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cr, "run_brain", interrupted)
+    argv = ["brain", "--mesh", str(mesh_folder / "brain.npz"), "--out", str(mesh_folder)]
+    assert main([*argv, "--overwrite"]) == 130
+    assert "stopped before any results were written" in one_line(capsys)
+    assert (mesh_folder / "brain.npz").read_bytes() == b"the mesh"
+
+
 def test_a_run_file_inside_out_is_read_and_kept(tmp_path, monkeypatch) -> None:
     out = tmp_path / "out"
     monkeypatch.setattr(hd, "run_hemidisk", fake_hemidisk({"fields.vtu": b"v"}))

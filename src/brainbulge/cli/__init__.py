@@ -149,6 +149,9 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         return InputError.exit_code
     except Exception as err:  # an unexpected failure: still one line unless --debug
         return _internal(err, args.debug)
+    except BaseException:  # SystemExit from a library, or worse: the status still tells
+        _mark("failed", "ended without finishing (an unexpected exit)")
+        raise
     finally:
         for signum, handler in previous.items():
             _on_signal(signum, handler)
@@ -226,7 +229,7 @@ def _kept() -> str:
     folder = _RUN.folder
     if folder is None:
         return "nothing was written"
-    written = folder.written() | set(folder.previous)
+    written = folder.written() | (set(folder.previous) if folder.resumed else set())
     results = [f for f in written if Path(f).name not in _BOOKKEEPING]
     again = any((folder.path / n).is_file() for n in ("study.json", "restart.npz"))
     resume = "; rerun the same command to resume" if again else ""

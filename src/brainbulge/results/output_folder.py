@@ -351,6 +351,7 @@ class OutputFolder:
     previous: Manifest = field(default_factory=dict)
     lock: Path | None = None
     journal: bool = False  # True once this process's journal is started
+    resumed: bool = False  # the folder holds an earlier run that this one goes on with
 
     def manifest(self) -> Manifest:
         """The files brainbulge wrote here that are still as written: those of the journal
@@ -442,6 +443,7 @@ def claim_output_dir(
         if action == "clear":
             folder.previous = clear_listed(path, manifest, protected)
         elif action == "resume":
+            folder.resumed = True
             now = folder_files(path)
             folder.previous = {f: sig for f, sig in manifest.items()
                                if f in now and matches(now[f], sig)}
