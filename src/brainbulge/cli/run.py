@@ -134,6 +134,7 @@ def run_command(args: argparse.Namespace) -> int:
     for name in ("out", "overwrite", "scheduler", "workers"):
         if hasattr(command_args, name):
             setattr(command_args, name, getattr(args, name))
+    command_args.config = args.config  # the run file: an input, never deleted
     return int(command_args.func(command_args) or 0)
 
 
