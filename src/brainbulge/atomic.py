@@ -43,6 +43,37 @@ def atomic_output(path: Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    note_written(path)
+
+
+#: The journal of a claimed output folder: one JSON line ``[path, size, mtime_ns]`` per file
+#: a brainbulge process (this one, a Dask worker, the mesher) wrote into it, appended as each
+#: is written; the folder's manifest is made from it (`brainbulge.results.output_folder`).
+JOURNAL = ".brainbulge.journal"
+
+
+def note_written(path: Path | str, tracked: bool = True) -> None:
+    """Record ``path`` in the journal of the nearest enclosing claimed output folder, if any,
+    with its size [bytes] and modification time [ns] (``tracked``) or without (a log that
+    grows while it runs). Best effort: a file left out is one ``--overwrite`` refuses to
+    delete, never one it deletes wrongly."""
+    p = Path(os.path.abspath(path))
+    for folder in p.parents:
+        journal = folder / JOURNAL
+        if not journal.is_file():
+            continue
+        try:
+            st = os.lstat(p)
+            rel = p.relative_to(folder).as_posix()
+            entry = [rel, st.st_size, st.st_mtime_ns] if tracked else [rel, None, None]
+            fd = os.open(journal, os.O_WRONLY | os.O_APPEND)
+            try:
+                os.write(fd, (json.dumps(entry) + "\n").encode("utf-8"))
+            finally:
+                os.close(fd)
+        except OSError:
+            pass
+        return
 
 
 def atomic_write_text(path: Path, text: str) -> Path:

@@ -14,6 +14,7 @@ import nibabel as nib
 import numpy as np
 import pytest
 
+from brainbulge.atomic import atomic_output, atomic_write_text
 from brainbulge.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -110,7 +111,7 @@ BAD = [
     (["mesh", "--tets", "5000"], "below 25,000"),
     (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
     (["brain", "--tets", "10000"], "give --tets 25000 or more"),
-    (["mesh", "--tets", "100000000"], "[1,000, 5,000,000]"),
+    (["mesh", "--tets", "100000000"], "[25,000, 5,000,000]"),
     (["mesh", "--refine", "7"], "--refine"),
     (["mesh", "--label-map", "m.json"], "--labels"),
     (["mesh", "--flap", "custom"], "flap-centre"),
@@ -141,6 +142,16 @@ BAD = [
     (["study", "hemidisk-sector", "--out", "{run}"], "--overwrite"),
     (["study", "hemidisk-disk", "--out", "{study}"], "'hemidisk-sector'"),
     (["study", "hemidisk-sector", "--alphas", "20", "--out", "{study}"], "16 scenarios, not 8"),
+    # run files are closed: a misspelt table or option is named, never ignored
+    (["run", "{toml:alpah = 70.0}"], "unknown option alpah in [hemidisk]; did you mean 'alpha'"),
+    (["run", "{toml:alpha = 70.0\n[caes]}"], "unknown table [caes]; did you mean 'case'?"),
+    (["run", "{brain_toml:flaps = 'left'}"], "did you mean 'flap'?"),
+    # checked before --out is claimed, however cheap or costly the check
+    (["study", "hemidisk-sector", "--alphas", "20", "20"], "repeats a value"),
+    (["brain", "--fibres", "{cube_labels}"], "expected (nx, ny, nz, 3)"),
+    (["brain", "--fibres", "{text_file}"], "cannot read fibre image"),
+    (["hemidisk", "--out", "{tmp}/" + "x" * 300], "choose a shorter --out"),
+    (["mesh", "--tets", "1.5"], "--tets must be a whole number"),
 ]
 
 #: exit code of each case: 2 (bad input) unless listed
@@ -154,8 +165,9 @@ def _finished_run(folder: Path, command: str = "hemidisk", manifest: bool = True
 
     claimed = claim_output_dir(folder, overwrite=False)
     write_run_record(folder, {"command": command, command: {"alpha": 80.0}}, ["brainbulge"])
-    (folder / "summary.json").write_text('{"max_displacement": 0.17}\n')
-    (folder / "fields.vtu").write_bytes(bytes(range(256)))
+    atomic_write_text(folder / "summary.json", '{"max_displacement": 0.17}\n')
+    with atomic_output(folder / "fields.vtu") as tmp:
+        tmp.write_bytes(bytes(range(256)))
     mark_status(folder, "complete")
     claimed.release()
     if not manifest:  # written by a brainbulge without manifests
@@ -175,9 +187,9 @@ def _finished_study(folder: Path) -> None:
     claimed = claim_output_dir(folder, overwrite=False)
     write_run_record(folder, {"command": "study", "study": "hemidisk-sector",
                               "scenarios": scenarios}, ["brainbulge"])
-    (folder / "study.json").write_text('{"n_scenarios": 16}\n')
+    atomic_write_text(folder / "study.json", '{"n_scenarios": 16}\n')
     (folder / scenarios[0]["name"]).mkdir()
-    (folder / scenarios[0]["name"] / "summary.json").write_text('{"complete": true}\n')
+    atomic_write_text(folder / scenarios[0]["name"] / "summary.json", '{"complete": true}\n')
     mark_status(folder, "complete")
     claimed.release()
 
@@ -269,18 +281,26 @@ def test_the_table_is_large() -> None:
     assert len(BAD) >= 60
 
 
-def test_a_listening_scheduler_address_passes_the_probe() -> None:
+def test_a_dask_scheduler_passes_the_probe_and_another_server_does_not(monkeypatch) -> None:
+    from distributed import LocalCluster
+
     from brainbulge.cli import checks
     from brainbulge.errors import InputError
 
-    with socket.socket() as server:
+    monkeypatch.setattr(checks, "SCHEDULER_PROBE_S", 1.0)
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://",
+                      dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        checks.scheduler(address)
+        checks.scheduler(address.removeprefix("tcp://").replace("127.0.0.1", "localhost"))
+    with pytest.raises(InputError, match="refused"):
+        checks.scheduler(address)
+    with socket.socket() as server:  # accepts, says nothing (as a stuck or foreign server)
         server.bind(("127.0.0.1", 0))
         server.listen()
         port = server.getsockname()[1]
-        checks.scheduler(f"tcp://127.0.0.1:{port}")
-        checks.scheduler(f"localhost:{port}")
-    with pytest.raises(InputError, match="refused"):
-        checks.scheduler(f"tcp://127.0.0.1:{port}")
+        with pytest.raises(InputError, match="not a Dask scheduler"):
+            checks.scheduler(f"tcp://127.0.0.1:{port}")
     checks.scheduler("inproc://127.0.0.1:1")  # in-process addresses are not probed
 
 

@@ -54,7 +54,8 @@ def test_overwrite_clears_a_previous_run_only(tmp_path: Path) -> None:
 
     write_run_record(run, {"a": 1}, ["bb"])
     (run / "mine.txt").write_text("a user's")  # not in the manifest: nothing is deleted
-    with pytest.raises(InputError, match=r"1 file\(s\) brainbulge did not write \(mine.txt;"):
+    with pytest.raises(InputError, match=r"1 file\(s\) brainbulge did not write or that "
+                       r"changed since \(mine.txt\)"):
         prepare_output_dir(run, overwrite=True)
     assert sorted(p.name for p in run.iterdir()) == ["mine.txt", "run.json", "run.toml"]
 

@@ -33,11 +33,57 @@ EXIT_INTERRUPTED = 130
 
 #: errno values of a write that failed for lack of space or permission (one line, exit 2)
 _DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
-_NO_WRITE = (errno.EROFS, errno.EACCES, errno.EPERM)
+_NO_WRITE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG)
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (e.g. a batch system's time limit): handled as an interruption."""
+    """SIGTERM (e.g. a batch system's time limit) or SIGHUP (the terminal or SSH session
+    closed): handled as an interruption."""
+
+    def __init__(self, signum: int = signal.SIGTERM) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signal_name = signal.Signals(signum).name
+
+
+#: signals that stop a command as Ctrl-C does (status written, children ended)
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+class _QuietStream:
+    """stdout or stderr whose failures never fail a run: the first write or flush that fails
+    (a closed pipe, ``> /dev/full``) sends the rest to the null device; the run goes on and
+    its status tells what it computed."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except (OSError, ValueError):
+            self._silence()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except (OSError, ValueError):
+            self._silence()
+
+    def _silence(self) -> None:
+        import os
+
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(null, self._stream.fileno())
+            finally:
+                os.close(null)
+        except (OSError, ValueError, AttributeError):
+            pass  # a stream without a file (a test's capture): its writes are dropped
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
 
 
 @dataclass
@@ -59,13 +105,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     global _RUN
     parser = build_parser()
     args = parser.parse_args(argv)
+    streams = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _QuietStream(sys.stdout), _QuietStream(sys.stderr)
+    try:
+        return _main(parser, args)
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        sys.stdout, sys.stderr = streams
+
+
+def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    global _RUN
     _setup_logging(args.verbose)
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
     configure_runtime()  # threads, MKL, heap, compiler cache: before NGSolve loads
     _RUN = _Run()
-    previous = _on_sigterm(_raise_terminated)
+    previous = {signum: _on_signal(signum, _raise_terminated) for signum in STOP_SIGNALS}
     try:
         return int(args.func(args) or 0)
     except BrainbulgeError as err:
@@ -76,7 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return err.exit_code
     except KeyboardInterrupt as err:
         _end_children()
-        how = "stopped by SIGTERM" if isinstance(err, Terminated) else "interrupted by the user"
+        how = (f"stopped by {err.signal_name}" if isinstance(err, Terminated)
+               else "interrupted by the user")
         _mark("incomplete", how)
         print(f"interrupted: {_kept()}", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -90,8 +149,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return InputError.exit_code
     except Exception as err:  # an unexpected failure: still one line unless --debug
         return _internal(err, args.debug)
+    except BaseException:  # SystemExit from a library, or worse: the status still tells
+        _mark("failed", "ended without finishing (an unexpected exit)")
+        raise
     finally:
-        _on_sigterm(previous)
+        for signum, handler in previous.items():
+            _on_signal(signum, handler)
         _release()
 
 
@@ -119,21 +182,24 @@ def _os_message(err: OSError) -> str:
     if err.errno in _DISK_FULL:
         kept = f"; results written so far are kept in {out}" if out is not None else ""
         return f"{what}: {why}; free some space or choose another --out{kept}"
+    if err.errno == errno.ENAMETOOLONG:
+        return f"{what}: {why}; choose a shorter --out (or shorter scenario names)"
     return f"{what}: {why}; " + ("choose a writable --out" if inside or not err.filename
                                  else "check that the file is readable")
 
 
 def _raise_terminated(signum: int, frame: Any) -> None:
-    raise Terminated()
+    raise Terminated(signum)
 
 
-def _on_sigterm(handler: Any) -> Any:
-    """Install ``handler`` for SIGTERM (main thread only); return the previous one."""
+def _on_signal(signum: int, handler: Any) -> Any:
+    """Install ``handler`` for ``signum`` (main thread only); return the previous one. A
+    signal ignored by whoever started brainbulge (``nohup`` ignores SIGHUP) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         return None
-    if handler is None:
+    if handler is None or signal.getsignal(signum) is signal.SIG_IGN:
         return None
-    return signal.signal(signal.SIGTERM, handler)
+    return signal.signal(signum, handler)
 
 
 def _end_children(grace: float = 2.0) -> None:
@@ -153,18 +219,24 @@ def _end_children(grace: float = 2.0) -> None:
         log.debug("ending child processes: %s", exc)
 
 
+#: files that record a run rather than hold its results (by name, in any subfolder)
+_BOOKKEEPING = frozenset({"run.json", "run.toml", "status.json", "brainbulge.log", "study.json",
+                          "scenario.json", "error.json", "restart.npz", "spec.json"})
+
+
 def _kept() -> str:
     """What an interruption left in the output folder, truthfully."""
     folder = _RUN.folder
     if folder is None:
         return "nothing was written"
-    record = {"run.json", "run.toml", "status.json", "brainbulge.log"}
-    results = [f for f in folder.written() if f not in record]
-    if not results:
-        return f"stopped before any results were written; {folder.path} holds the run record only"
+    written = folder.written() | (set(folder.previous) if folder.resumed else set())
+    results = [f for f in written if Path(f).name not in _BOOKKEEPING]
     again = any((folder.path / n).is_file() for n in ("study.json", "restart.npz"))
-    return (f"results finished so far are kept in {folder.path}"
-            + ("; rerun the same command to resume" if again else ""))
+    resume = "; rerun the same command to resume" if again else ""
+    if not results:
+        return (f"stopped before any results were written; {folder.path} holds the run "
+                f"record only{resume}")
+    return f"results finished so far are kept in {folder.path}{resume}"
 
 
 def _mark(status: str, message: str) -> None:
@@ -198,7 +270,10 @@ def _setup_logging(verbose: int) -> None:
 
 def add_log_file(out: Path) -> logging.Handler:
     """Also log (INFO and above) to ``out/brainbulge.log``."""
+    from brainbulge.atomic import note_written
+
     handler = logging.FileHandler(Path(out) / "brainbulge.log")
+    note_written(Path(out) / "brainbulge.log", tracked=False)  # it grows while the run goes on
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     log.addHandler(handler)
@@ -213,11 +288,12 @@ def progress_bar() -> bool:
 def start_run(args: argparse.Namespace, config: dict[str, Any], resume: bool = False) -> Path:
     """Claim ``--out`` (checked, created, locked; cleared only with ``--overwrite``), write the
     run record, mark it running, start the log file. Call only after every input is checked."""
-    from brainbulge.results.output_folder import claim_output_dir
+    from brainbulge.results.output_folder import claim_output_dir, config_paths
     from brainbulge.results.run_record import mark_status, write_run_record
 
+    inputs = [*config_paths(config), getattr(args, "config", None)]  # never deleted
     folder = claim_output_dir(args.out, overwrite=args.overwrite, resume=resume,
-                              config=config)
+                              config=config, inputs=inputs)
     _RUN.folder = folder
     out = folder.path
     write_run_record(out, config, None, files=folder.previous)
@@ -277,6 +353,27 @@ def positive_float(name: str) -> Callable[[str], float]:
         if not math.isfinite(v) or v <= 0:
             raise argparse.ArgumentTypeError(f"{name} must be a positive number, got {text}")
         return v
+
+    return parse
+
+
+def whole_number(name: str) -> Callable[[str], int]:
+    """argparse type: a whole number, also written as ``1e5`` or ``100_000`` (as the help's
+    defaults are), with a one-line error naming the option."""
+
+    def parse(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            pass
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{name} must be a whole number, got {text!r}") from None
+        if not v.is_integer():
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text}")
+        return int(v)
 
     return parse
 

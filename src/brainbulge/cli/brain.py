@@ -20,6 +20,7 @@ from brainbulge.cli import (
     progress_bar,
     require,
     start_run,
+    whole_number,
 )
 from brainbulge.geometry.brain.defaults import (
     EDGE_RADIUS_MM,
@@ -45,7 +46,7 @@ def add_parser(sub: Any) -> None:
                    help="target Js of the white matter (paper: 1.1)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--mesh", default=None, help="brain.npz written by `brainbulge mesh`")
-    src.add_argument("--tets", type=int, default=30_000,
+    src.add_argument("--tets", type=whole_number("--tets"), default=30_000,
                      help="build a mesh of about this many tets (default 30000)")
     p.add_argument("--labels", default=None, help="NIfTI label map (default: ICBM152 template)")
     p.add_argument("--label-map", default=None,
@@ -71,7 +72,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--linear-solver", choices=("pardiso", "krylov"), default=None,
                    help="direct, or GMRES with AMG blocks (default: from the size, krylov "
                    f"from {LARGE_TETS:,} tets)")
-    p.add_argument("--coarse-tets", type=int, default=None,
+    p.add_argument("--coarse-tets", type=whole_number("--coarse-tets"), default=None,
                    help="mesh sequencing: solve first on a mesh of about this many tets, then "
                    "finish on the fine mesh from its solution (MINI; default: none, the load is "
                    "ramped on the mesh itself)")

@@ -11,6 +11,7 @@ import logging
 import math
 import re
 import socket
+import threading
 import types
 import typing
 from pathlib import Path
@@ -205,6 +206,10 @@ def brain_case(config: dict[str, Any]) -> Any:
     case = case_from_dict(config)
     number("steps", case.steps, *STEPS, integer=True)
     flap_centre(case.flap_centre_mm)
+    if case.fibres is not None:
+        from brainbulge.geometry.brain.fibres import check_fibres
+
+        check_fibres(case.fibres)  # its header: shape and size, not its data
     if case.mesh is None:
         labelled = None if case.labels is None else labelled_ml(case.labels, case.label_map)
         mesh_tets(case.tets, case.refine, template=case.labels is None, labelled_ml=labelled)
@@ -223,13 +228,15 @@ def mesh_tets(tets: Any, refine: Any, template: bool, labelled_ml: float | None 
     ICBM152 template (``template``) at least `TEMPLATE_TETS_MIN` before refinement, of a
     segmentation with ``labelled_ml`` ml of tissue at least `LABELS_TETS_PER_ML` per ml."""
     number("--refine", refine, 0, 3, integer=True)
-    number("--tets", tets, *MESH_TETS, integer=True)
     made = f"--tets {tets}" + (f" / 8^{refine}" if refine else "")
-    if template and tets / 8**refine < TEMPLATE_TETS_MIN:
+    whole = isinstance(tets, int) and not isinstance(tets, bool)
+    if template and whole and tets / 8**refine < TEMPLATE_TETS_MIN:
         raise InputError(
             f"{made} is below {TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template "
             f"that coarse (it retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} "
             "or more")
+    lo = TEMPLATE_TETS_MIN * 8**refine if template else MESH_TETS[0]  # the range that holds
+    number("--tets", tets, min(lo, MESH_TETS[1]), MESH_TETS[1], integer=True)
     if labelled_ml is None:
         return
     least, safe = (math.ceil(rate * labelled_ml) * 8**refine for rate in LABELS_TETS_PER_ML)
@@ -294,3 +301,39 @@ def scheduler(address: str | None) -> None:
             f"--scheduler {address}: no Dask scheduler reachable there ({reason.lower()}); "
             "start one (`dask scheduler`) or correct the address, or leave --scheduler out "
             "for a local cluster") from None
+    if protocol not in ("", "tcp"):
+        return  # a handshake over TLS or websockets needs the cluster's security settings
+    reply = _identity(address if protocol else f"tcp://{address}")
+    if not (isinstance(reply, dict) and reply.get("type") == "Scheduler"):
+        raise InputError(
+            f"--scheduler {address}: something listens there, but it is not a Dask scheduler "
+            f"(no Dask handshake in {SCHEDULER_PROBE_S:g} s); give the scheduler's address "
+            "(`dask scheduler` prints it), or leave --scheduler out for a local cluster")
+
+
+def _identity(address: str) -> Any:
+    """The Dask ``identity`` reply of the server at ``address``, within
+    `SCHEDULER_PROBE_S` seconds in all; None if there is none (another kind of server)."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def ask() -> Any:
+        comm = await connect(address, timeout=SCHEDULER_PROBE_S)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def probe(found: list[Any]) -> None:  # in its own thread: the caller may run a loop
+        try:
+            found.append(asyncio.run(asyncio.wait_for(ask(), SCHEDULER_PROBE_S)))
+        except Exception:  # noqa: BLE001 - a timeout, a refused or garbled handshake
+            pass
+
+    found: list[Any] = []
+    thread = threading.Thread(target=probe, args=(found,), daemon=True)
+    thread.start()
+    thread.join(SCHEDULER_PROBE_S + 1.0)
+    return found[0] if found else None

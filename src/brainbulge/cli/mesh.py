@@ -14,11 +14,16 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.brain.defaults import VOLUME_OF
 
 FLAPS = ("frontal", "left", "right", "custom")
+#: the ``[mesh]`` table of the run file: key -> the option it records
+CONFIG_OPTIONS = {"labels": "--labels", "label_map": "--label-map", "tets": "--tets",
+                  "brain_volume_ml": "--brain-volume", "flap": "--flap",
+                  "flap_centre_mm": "--flap-centre", "flap_diameter_mm": "--flap-diameter",
+                  "base_z_mm": "--base-z", "csf_layer_mm": "--csf-layer", "refine": "--refine"}
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register the ``mesh`` subcommand."""
-    from brainbulge.cli import add_output_options, positive_float
+    from brainbulge.cli import add_output_options, positive_float, whole_number
 
     p = subparsers.add_parser(
         "mesh", help="labelled tet mesh of a brain from MRI labels", description=__doc__
@@ -31,7 +36,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         '{"gray": [codes], "white": [...], "csf": [...], "cerebellum": [...], '
         '"brainstem": [...]} (default freesurfer)',
     )
-    p.add_argument("--tets", type=int, default=100_000, help="about how many tets (default 1e5)")
+    p.add_argument("--tets", type=whole_number("--tets"), default=100_000,
+                   help="about how many tets (default 1e5)")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
                    metavar="ML", help="scale the head so that the --volume-of volume is this "
                    "[ml] (the paper's brain, gray + white matter: 1108)")
@@ -77,11 +83,10 @@ def run(args: argparse.Namespace) -> int:
     image = load_tissue_image(args.labels, args.label_map) if args.labels else None
     checks.mesh_tets(args.tets, args.refine, template=args.labels is None,
                      labelled_ml=sum(image.volumes_ml().values()) if image else None)
-    config = {"command": "mesh", "mesh": {
-        "labels": args.labels, "label_map": args.label_map, "tets": args.tets,
-        "brain_volume_ml": args.brain_volume, "volume_of": args.volume_of, "flap": args.flap,
-        "flap_centre_mm": args.flap_centre, "flap_diameter_mm": args.flap_diameter,
-        "base_z_mm": args.base_z, "csf_layer_mm": args.csf_layer, "refine": args.refine}}
+    config = {"command": "mesh", "mesh": {key: getattr(args, opt[2:].replace("-", "_"))
+                                          for key, opt in CONFIG_OPTIONS.items()}}
+    if args.labels is None:  # the template's labels are built in
+        config["mesh"]["label_map"] = None
     out = start_run(args, config)
     mesh = build_brain_mesh(
         image, target_tets=args.tets, brain_volume_ml=args.brain_volume, volume_of=args.volume_of,

@@ -17,12 +17,26 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, positive_float, require, start_run
+from brainbulge.cli import (
+    add_output_options,
+    finish_run,
+    positive_float,
+    require,
+    start_run,
+    whole_number,
+)
 
 #: flap diameters the planner accepts [mm] (reported clinical areas 9.5-205 cm^2)
 DIAMETER_RANGE_MM = (40.0, 200.0)
 #: candidate centres at most
 MAX_CENTRES = 100
+#: the ``[plan]`` table of the run file: key -> the option it records
+CONFIG_OPTIONS = {"swell": "--swell", "swelling": "--swelling", "steps": "--steps",
+                  "tolerance": "--tolerance", "linear_solver": "--linear-solver",
+                  "edge_radius_mm": "--skull-edge-radius", "mesh": "--mesh", "tets": "--tets",
+                  "labels": "--labels", "label_map": "--label-map",
+                  "diameters_mm": "--diameters", "centres_mm": "--centre",
+                  "n_centres": "--centres", "strain_threshold": "--threshold"}
 
 
 def add_parser(sub: Any) -> None:
@@ -46,7 +60,7 @@ def add_parser(sub: Any) -> None:
                      help="NIfTI label map (default: the ICBM152 template)")
     p.add_argument("--label-map", default=None,
                    help="label preset or JSON file of --labels (default synthseg)")
-    p.add_argument("--tets", type=int, default=100_000,
+    p.add_argument("--tets", type=whole_number("--tets"), default=100_000,
                    help="mesh size built here in tets (default 100000)")
     p.add_argument("--diameters", type=float, nargs="+", default=list(DIAMETERS_MM),
                    metavar="MM", help="flap diameters [mm] (default "

@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run
+from brainbulge.cli import add_output_options, finish_run, start_run, whole_number
 from brainbulge.errors import InputError, StudyIncomplete
 from brainbulge.studies.suites import STUDIES
 
@@ -31,7 +31,7 @@ def add_parser(sub: Any) -> None:
                    help="element size on the edge-exclusion circles [units of R] (default h/10)")
     p.add_argument("--skull", choices=("paper", "rigid"), default="paper",
                    help="2D skull model (hemidisk studies): the paper's arc or a rigid shell")
-    p.add_argument("--tets", type=int, default=30_000,
+    p.add_argument("--tets", type=whole_number("--tets"), default=30_000,
                    help="brain mesh size in tets (craniectomy study)")
     p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
     p.add_argument("--swelling", type=float, default=1.1, help="white-matter Js (craniectomy)")
@@ -73,23 +73,38 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
-    from brainbulge.studies.suites import incomplete_text, run_named_study
 
     if args.workers is not None and not 1 <= args.workers <= 256:
         raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
     checks.scheduler(args.scheduler)
-    scenarios = scenarios_for(args.name, args)
+    for option in ("alphas", "betas"):
+        values = getattr(args, option) or []
+        if len(set(values)) < len(values):
+            raise InputError(f"--{option} {' '.join(f'{v:g}' for v in values)} repeats a "
+                             "value; give each once")
+    return run_scenarios(args, args.name, scenarios_for(args.name, args))
+
+
+def run_scenarios(args: argparse.Namespace, name: str, scenarios: list[dict[str, Any]]) -> int:
+    """Check every scenario of study ``name``, claim ``--out`` (resumed if it holds this
+    study), run them and report; the exit code."""
+    from brainbulge.cli import checks
+    from brainbulge.studies.runner import validate_scenarios
+    from brainbulge.studies.suites import incomplete_text, run_named_study
+
+    validate_scenarios(scenarios)  # names: present, unique
     for sc in scenarios:  # check every scenario before anything starts: exit 2, not 4
-        if args.name == "craniectomy":
+        if name == "craniectomy":
             checks.brain_case(sc)
         else:
             checks.hemidisk_case({k: v for k, v in sc.items() if k != "name"})
     out_path = Path(args.out)
     resume = (out_path / "study.json").is_file() and not args.overwrite
     out = start_run(
-        args, {"command": "study", "study": args.name, "scenarios": scenarios}, resume=resume
+        args, {"command": "study", "study": name, "scenarios": scenarios}, resume=resume
     )
-    n_ok = run_named_study(args.name, scenarios, out, args.scheduler, args.workers)
+    n_ok = run_named_study(name, scenarios, out, getattr(args, "scheduler", None),
+                           getattr(args, "workers", None))
     if n_ok < len(scenarios):
         raise StudyIncomplete(
             f"{len(scenarios) - n_ok} of {len(scenarios)} scenarios did not complete: "

@@ -130,11 +130,14 @@ def case_from_config(cls: type[Case], config: dict[str, Any], what: str) -> Case
     """A case dataclass ``cls`` from a plain dict (TOML table, CLI, study scenario), with a
     one-line error naming unknown or ill-typed ``what`` options."""
     names = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(config) - names
+    unknown = sorted(set(config) - names)
     if unknown:
+        import difflib
+
+        near = difflib.get_close_matches(unknown[0], sorted(names), n=1, cutoff=0.6)
         raise InputError(
-            f"unknown {what} option(s) {', '.join(sorted(unknown))}; "
-            f"valid: {', '.join(sorted(names))}"
+            f"unknown {what} option(s) {', '.join(unknown)}; "
+            + (f"did you mean {near[0]!r}?" if near else f"valid: {', '.join(sorted(names))}")
         )
     try:
         return cls(**config)

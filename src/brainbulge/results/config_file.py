@@ -8,6 +8,7 @@ one-line errors.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import enum
 import re
 import tomllib
@@ -79,3 +80,38 @@ def load_config(path: Path) -> dict[str, Any]:
         msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)\s*$", "", msg)
         where = f"line {lineno}" if lineno is not None else "end of file"
         raise InputError(f"invalid TOML in {path}, {where}: {msg}") from exc
+
+
+#: A run file's schema: key -> None (a value of any kind), a schema (a table) or a list of
+#: one schema (an array of tables)
+Schema = dict[str, Any]
+
+
+def check_keys(config: Mapping[str, Any], schema: Schema, where: str, _table: str = "") -> None:
+    """Refuse (`InputError`, one line) a table or key of ``config`` that ``schema`` does not
+    know, naming the nearest valid one, or where it belongs if it is valid in another table;
+    a value of the wrong kind (a table for a value, a value for a table) likewise."""
+    for key, value in config.items():
+        name = f"{_table}.{key}" if _table else key
+        if key not in schema:
+            kind = "table" if isinstance(value, Mapping) else "option"
+            shown = f"[{name}]" if kind == "table" else key
+            homes = [t for t, sub in schema.items() if isinstance(sub, dict) and key in sub]
+            if homes:
+                hint = f"it belongs in [{_table + '.' if _table else ''}{homes[0]}]"
+            else:
+                near = difflib.get_close_matches(key, list(schema), n=1, cutoff=0.6)
+                hint = (f"did you mean {near[0]!r}?" if near else
+                        f"valid here: {', '.join(sorted(schema))}")
+            raise InputError(f"{where}: unknown {kind} {shown}" + (
+                f" in [{_table}]" if _table and kind == "option" else "") + f"; {hint}")
+        sub = schema[key]
+        if isinstance(sub, dict):
+            if not isinstance(value, Mapping):
+                raise InputError(f"{where}: {name} must be a table ([{name}]) of options")
+            check_keys(value, sub, where, name)
+        elif isinstance(sub, list):
+            if not isinstance(value, list) or not all(isinstance(v, Mapping) for v in value):
+                raise InputError(f"{where}: {name} must be an array of tables ([[{name}]])")
+            for item in value:
+                check_keys(item, sub[0], where, name)

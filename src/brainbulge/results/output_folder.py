@@ -9,14 +9,22 @@ A brainbulge command *claims* its ``--out`` folder before writing anything into 
   exclusively (``os.link`` of a complete temporary file, so it is never half-written) with
   the owner's process id, host and start time. A lock whose process is gone (same host) is
   stale: it is removed with a warning. A second run into the same folder is refused;
-* ``--overwrite`` deletes only the files listed in the folder's manifest, never the current
-  folder or one of its ancestors, and never a file brainbulge did not write;
-* while the run goes on, the manifest (``run.json["files"]``: the paths, relative to the
-  folder, of every file a brainbulge run wrote there) is refreshed on every status change;
-  releasing the folder writes it a last time and removes the lock.
+* ``--overwrite`` deletes only the files listed in the folder's manifest that are as
+  brainbulge wrote them (same size and modification time), never an input of the command
+  (``--mesh``, ``--labels``, a run file...), the current folder or one of its ancestors. It is
+  all or nothing: the old files are first moved aside into one hidden folder, which is deleted
+  only once all of them are there; if one cannot be moved, those moved go back and the folder
+  is as it was;
+* while the run goes on, every file a brainbulge process writes into the folder (this one,
+  its Dask workers) is appended to the folder's journal (``.brainbulge.journal``) as it is
+  written, with its size and modification time; the manifest (``run.json["files"]``: path
+  relative to the folder -> ``[size, mtime_ns]``, or null for logs) is made from it on every
+  status change; releasing the folder writes it a last time and removes the journal and the
+  lock. A file that appears in the folder by other means (a notebook saved there, another
+  run's results in a subfolder) is never listed.
 
-A file counts as written by this run if it is new or changed (inode, size or modification
-time) since the folder was claimed; files of a resumed run's manifest stay listed.
+Files of a resumed run's manifest stay listed; the journal of a killed run counts as its
+manifest.
 """
 
 from __future__ import annotations
@@ -25,13 +33,30 @@ import errno
 import json
 import logging
 import os
+import shutil
 import socket
 import time
 from dataclasses import dataclass, field
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any
 
+from brainbulge.atomic import JOURNAL
 from brainbulge.errors import InputError
+from brainbulge.results.manifest import (
+    ASIDE,
+    LOCK_FILE,
+    MANIFEST_KEY,
+    Manifest,
+    clear_listed,
+    config_paths,
+    folder_files,
+    ignored,
+    is_input,
+    matches,
+    read_journal,
+    read_manifest,
+    resolve_inputs,
+)
 
 log = logging.getLogger(__name__)
 
@@ -40,74 +65,22 @@ __all__ = [
     "OutputFolder",
     "check_out_path",
     "claim_output_dir",
+    "config_paths",
     "folder_files",
     "prepare_output_dir",
     "read_manifest",
     "refresh_manifest",
 ]
 
-#: The lock file of a folder in use (not part of any manifest).
-LOCK_FILE = ".brainbulge.lock"
-#: Key of the manifest in ``run.json``.
-MANIFEST_KEY = "files"
 #: Files that mark a folder as written by brainbulge.
 RUN_MARKERS = ("run.json", "run.toml", "status.json", "study.json")
 #: Files that make a folder resumable (a study, a 3D run stopped mid-way).
 RESUMABLE = ("study.json", "restart.npz")
 #: Folders claimed by this process (their manifests are refreshed by `refresh_manifest`).
 _CLAIMED: dict[Path, OutputFolder] = {}
-
-Signature = tuple[int, int, int]
-
-
-# --------------------------------------------------------------------------- listing
-
-
-def _is_temporary(name: str) -> bool:
-    """Temporary files of brainbulge's atomic writes (``.NAME.XXXX.tmp[.EXT]``,
-    ``NAME.tmp.npz``)."""
-    return name == LOCK_FILE or name.startswith(f"{LOCK_FILE}.") or (
-        name.startswith(".") and (name.endswith(".tmp") or ".tmp." in name)
-    ) or name.endswith(".tmp.npz")
-
-
-def folder_files(path: Path) -> dict[str, Signature]:
-    """Every file (and symbolic link) under ``path``, as ``relative posix path -> (inode,
-    size, mtime_ns)``; subfolders are walked without following links; the lock and the
-    temporary files of atomic writes are left out."""
-    root = Path(path)
-    found: dict[str, Signature] = {}
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
-        here = Path(dirpath)
-        links = [d for d in dirnames if (here / d).is_symlink()]
-        dirnames[:] = [d for d in dirnames if d not in links]
-        for name in (*filenames, *links):
-            if _is_temporary(name):
-                continue
-            try:
-                st = (here / name).lstat()
-            except OSError:
-                continue
-            found[(here / name).relative_to(root).as_posix()] = (st.st_ino, st.st_size,
-                                                                st.st_mtime_ns)
-    return found
-
-
-def read_manifest(path: Path) -> set[str] | None:
-    """The files listed in ``path/run.json`` (``None`` if there is no such list)."""
-    try:
-        record = json.loads((Path(path) / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    files = record.get(MANIFEST_KEY) if isinstance(record, dict) else None
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-        return None
-    return {f for f in files if _safe_relative(f)}
-
-
-def _safe_relative(name: str) -> bool:
-    p = PurePosixPath(name)
-    return bool(name) and not p.is_absolute() and ".." not in p.parts
+#: Room kept for the names brainbulge writes inside ``--out`` (scenario folders of up to 100
+#: characters and their files) [characters]
+NAME_ROOM = 160
 
 
 def _is_run_folder(path: Path) -> bool:
@@ -123,11 +96,23 @@ def _listing(names: list[str], limit: int = 3) -> str:
 
 
 def check_out_path(path: Path | str, overwrite: bool) -> Path:
-    """Refuse an ``--out`` that cannot be right, before anything is touched: empty, a file,
-    or (with ``overwrite``) the current folder or one of its ancestors."""
+    """Refuse an ``--out`` that cannot be right, before anything is touched: empty, a name
+    too long for the file system, a file, or (with ``overwrite``) the current folder or one of
+    its ancestors."""
     if str(path).strip() == "":
         raise InputError("--out is empty; give the name of a folder for the results")
     path = Path(path)
+    name_max, path_max = _name_limits(path)
+    long = [part for part in path.parts if len(os.fsencode(part)) > name_max]
+    if long:
+        raise InputError(f"--out: the name {long[0][:40]}... has {len(os.fsencode(long[0]))} "
+                         f"characters, more than the {name_max} the file system allows; choose "
+                         "a shorter --out")
+    full = len(os.fsencode(os.path.abspath(path)))
+    if full + NAME_ROOM > path_max:
+        raise InputError(f"--out is {full} characters long as a full path; the results need "
+                         f"{NAME_ROOM} more, and the file system allows {path_max}: choose a "
+                         "shorter --out")
     if path.exists() and not path.is_dir():
         raise InputError(f"output folder {path} exists and is a file; choose another --out")
     if overwrite and path.exists():
@@ -138,6 +123,17 @@ def check_out_path(path: Path | str, overwrite: bool) -> Path:
                 "home folder); choose a new folder for --out"
             )
     return path
+
+
+def _name_limits(path: Path) -> tuple[int, int]:
+    """The longest file name and path [bytes] where ``path`` would be created."""
+    here = Path(os.path.abspath(path))
+    while not here.exists() and here != here.parent:
+        here = here.parent
+    try:
+        return os.pathconf(here, "PC_NAME_MAX"), os.pathconf(here, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 255, 4096
 
 
 def _normalised(config: Any) -> Any:
@@ -197,7 +193,7 @@ def _check_same_run(path: Path, config: dict[str, Any] | None) -> None:
 
 
 def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] | None,
-             locked: bool = False) -> str:
+             locked: bool = False, inputs: frozenset[Path] = frozenset()) -> str:
     """What to do with ``path``: "fresh" (missing or empty), "resume" or "clear"; read-only.
 
     Raises `InputError` for every folder that must not be used."""
@@ -209,7 +205,8 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
         _check_lock(path)
     try:
         present = folder_files(path)
-        empty = not present and not any(p.name != LOCK_FILE for p in path.iterdir())
+        empty = not present and not any(
+            p.name not in (LOCK_FILE, JOURNAL) for p in path.iterdir())
     except OSError as exc:
         raise InputError(f"cannot read output folder {path}: {exc.strerror or exc}") from exc
     if empty:
@@ -239,42 +236,16 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
             f"output folder {path} is not empty and is not a brainbulge output (no run.json"
             " or study.json); refusing to delete it, choose another --out"
         )
-    foreign = sorted(f for f in present if f not in manifest)
+    foreign = sorted(f for f, sig in present.items()
+                     if (f not in manifest or not matches(sig, manifest[f]))
+                     and not is_input(path / f, inputs))
     if foreign:
         raise InputError(
-            f"output folder {path} holds {len(foreign)} file(s) brainbulge did not write "
-            f"({_listing(foreign)}; files of a killed run are not listed either); --overwrite "
-            "never deletes those: move them away or choose another --out"
+            f"output folder {path} holds {len(foreign)} file(s) brainbulge did not write or "
+            f"that changed since ({_listing(foreign)}); --overwrite never deletes those: move "
+            "them away or choose another --out"
         )
     return "clear"
-
-
-def _clear(path: Path) -> None:
-    """Delete the files of ``path``'s manifest, then the subfolders left empty."""
-    manifest = read_manifest(path) or set()
-    root = path.resolve()
-    folders = set()
-    for name in sorted(manifest):
-        target = path / name
-        if root not in target.parent.resolve().parents and target.parent.resolve() != root:
-            continue  # reached through a link out of the folder: not ours to delete
-        if target.is_symlink() or target.is_file():
-            target.unlink()
-        folders.update(p for p in target.relative_to(path).parents if str(p) != ".")
-    for sub in sorted(folders, key=lambda p: len(p.parts), reverse=True):
-        with _ignored(OSError):
-            (path / sub).rmdir()  # only if empty
-
-
-class _ignored:
-    def __init__(self, *exc: type[BaseException]) -> None:
-        self.exc = exc
-
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, kind: Any, value: Any, tb: Any) -> bool:
-        return kind is not None and issubclass(kind, self.exc)
 
 
 # --------------------------------------------------------------------------- the lock
@@ -377,15 +348,23 @@ class OutputFolder:
 
     path: Path
     created: bool
-    previous: set[str] = field(default_factory=set)
-    snapshot: dict[str, Signature] = field(default_factory=dict)
+    previous: Manifest = field(default_factory=dict)
     lock: Path | None = None
+    journal: bool = False  # True once this process's journal is started
+    resumed: bool = False  # the folder holds an earlier run that this one goes on with
+
+    def manifest(self) -> Manifest:
+        """The files brainbulge wrote here that are still as written: those of the journal
+        and of the earlier manifest (resume, kept inputs), with ``run.json``."""
+        now = folder_files(self.path) if self.path.is_dir() else {}
+        listed = {**self.previous, **read_journal(self.path)}
+        found = {f: sig for f, sig in listed.items() if f in now and matches(now[f], sig)}
+        return {**found, "run.json": None}
 
     def written(self) -> set[str]:
-        """Files of the earlier manifest plus those new or changed since the claim."""
-        now = folder_files(self.path) if self.path.is_dir() else {}
-        fresh = {f for f, sig in now.items() if self.snapshot.get(f) != sig}
-        return {f for f in self.previous if f in now} | fresh
+        """The names of `manifest` that this run wrote (not those of the earlier manifest)."""
+        journal = read_journal(self.path)
+        return {f for f in self.manifest() if f in journal}
 
     def record_files(self) -> None:
         """Write the manifest into ``run.json`` (if the run record exists)."""
@@ -396,25 +375,30 @@ class OutputFolder:
             record = json.loads(run_json.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return
-        record[MANIFEST_KEY] = sorted(self.written() | {"run.json"})
+        record[MANIFEST_KEY] = {f: None if sig is None else list(sig)
+                                for f, sig in sorted(self.manifest().items())}
         atomic_write_json(run_json, record)
 
     def drop_empty_files(self) -> list[str]:
         """Delete the empty files this run created (e.g. left by a full disk)."""
         dropped = []
-        for name in sorted(self.written() - self.previous):
+        for name in sorted(self.written() - set(self.previous)):
             target = self.path / name
-            with _ignored(OSError):
+            with ignored(OSError):
                 if target.is_file() and not target.is_symlink() and target.stat().st_size == 0:
                     target.unlink()
                     dropped.append(name)
         return dropped
 
     def release(self) -> None:
-        """Refresh the manifest (best effort) and remove the lock."""
+        """Refresh the manifest (best effort) and remove the journal and the lock; if the
+        manifest cannot be written (a full disk) the journal stays: it lists the files."""
         _CLAIMED.pop(self.path.resolve(), None)
         try:
-            self.record_files()
+            if self.journal:  # else the claim failed: the folder's record is left as it was
+                self.record_files()
+                (self.path / JOURNAL).unlink(missing_ok=True)
+                self.journal = False
         except OSError as exc:  # e.g. the disk is full: the lock still goes
             log.info("could not update the file list in %s: %s", self.path / "run.json",
                         exc.strerror or exc)
@@ -425,16 +409,18 @@ class OutputFolder:
 
 def claim_output_dir(
     path: Path | str, overwrite: bool, resume: bool = False,
-    config: dict[str, Any] | None = None,
+    config: dict[str, Any] | None = None, inputs: Any = (),
 ) -> OutputFolder:
     """Check, create, lock and (``overwrite``) clear the output folder ``path``.
 
     Refused with `InputError` (nothing touched): see the module docstring. On ``resume``
     the folder must hold ``study.json`` or ``restart.npz`` and, if it has a ``run.toml``,
-    the same ``config``. Release the returned folder with `OutputFolder.release`.
+    the same ``config``. ``inputs`` (paths the command reads) are never deleted. Release the
+    returned folder with `OutputFolder.release`.
     """
     path = check_out_path(path, overwrite)
-    _inspect(path, overwrite, resume, config)  # everything read-only first
+    protected = resolve_inputs(inputs)
+    _inspect(path, overwrite, resume, config, inputs=protected)  # everything read-only first
     created = not path.exists()
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -445,21 +431,41 @@ def claim_output_dir(
         lock = _acquire_lock(path)
     except InputError:
         if created:
-            with _ignored(OSError):
+            with ignored(OSError):
                 path.rmdir()
         raise
     folder = OutputFolder(path, created, lock=lock)
     try:
-        action = _inspect(path, overwrite, resume, config, locked=True)  # again, under the lock
+        action = _inspect(path, overwrite, resume, config, locked=True, inputs=protected)
+        for old in path.glob(f"{ASIDE}*"):  # left by an --overwrite that was killed
+            shutil.rmtree(old, ignore_errors=True)
+        manifest = read_manifest(path) or {}
         if action == "clear":
-            _clear(path)
-        folder.previous = (read_manifest(path) or set()) if action == "resume" else set()
-        folder.snapshot = folder_files(path)
+            folder.previous = clear_listed(path, manifest, protected)
+        elif action == "resume":
+            folder.resumed = True
+            now = folder_files(path)
+            folder.previous = {f: sig for f, sig in manifest.items()
+                               if f in now and matches(now[f], sig)}
+        _start_journal(path)
+        folder.journal = True
     except BaseException:
         folder.release()
         raise
     _CLAIMED[path.resolve()] = folder
     return folder
+
+
+def _start_journal(path: Path) -> None:
+    """An empty journal in ``path`` (replacing that of a killed run, already read)."""
+    tmp = path / f"{JOURNAL}.{os.getpid()}.tmp"
+    try:
+        tmp.write_bytes(b"")
+        os.replace(tmp, path / JOURNAL)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"cannot write into output folder {path}: {exc.strerror or exc}; "
+                         "choose a writable --out") from exc
 
 
 def refresh_manifest(path: Path) -> None:
@@ -485,6 +491,7 @@ def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Pat
     ``study.json`` or ``restart.npz``, reused as is)."""
     folder = claim_output_dir(path, overwrite, resume)
     _CLAIMED.pop(folder.path.resolve(), None)
+    (folder.path / JOURNAL).unlink(missing_ok=True)
     if folder.lock is not None:
         folder.lock.unlink(missing_ok=True)
     return folder.path

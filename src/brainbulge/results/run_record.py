@@ -28,6 +28,7 @@ allows: a reader never sees half a file, even after a crash.
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import subprocess
@@ -147,15 +148,16 @@ def _find_seed(config: Mapping[str, Any]) -> Any:
 
 def write_run_record(
     out_dir: Path, config: Mapping[str, Any], command: list[str] | None,
-    files: set[str] | None = None,
+    files: Mapping[str, Any] | set[str] | None = None,
 ) -> Path:
     """Write ``run.toml`` (the resolved ``config``) and ``run.json`` (provenance) into
     ``out_dir``; return the path of ``run.toml``.
 
     ``command`` is the command line to record (``sys.argv`` if None). ``config`` must be
     convertible by `toml_ready` (tuples, paths, enums, dataclasses, numpy values are
-    converted; None values are dropped). ``files`` (the manifest of a resumed run) are listed
-    in ``run.json["files"]`` with ``run.toml`` and ``run.json``.
+    converted; None values are dropped). ``files`` (the manifest of a resumed run: names, or
+    names -> ``(size, mtime_ns)`` as written) are listed in ``run.json["files"]`` with
+    ``run.toml`` and ``run.json``.
     """
     out_dir = Path(out_dir)
     start = datetime.now(UTC).isoformat(timespec="seconds")
@@ -177,10 +179,19 @@ def write_run_record(
         "start_time": start,
         "seed": _find_seed(table),
         "config_file": toml_path.name,
-        "files": sorted(set(files or ()) | {"run.json", toml_path.name}),
+        "files": _file_list(files, toml_path),
     }
     atomic_write_json(out_dir / "run.json", record)
     return toml_path
+
+
+def _file_list(files: Mapping[str, Any] | set[str] | None, toml_path: Path
+               ) -> dict[str, list[int] | None]:
+    """``files`` as ``run.json["files"]``, with ``run.toml`` (as written) and ``run.json``."""
+    listed = dict(files) if isinstance(files, Mapping) else dict.fromkeys(files or ())
+    st = toml_path.stat()
+    listed |= {toml_path.name: (st.st_size, st.st_mtime_ns), "run.json": None}
+    return {f: None if sig is None else list(sig) for f, sig in sorted(listed.items())}
 
 
 def mark_status(out_dir: Path, status: str, message: str = "") -> Path:
@@ -196,6 +207,16 @@ def mark_status(out_dir: Path, status: str, message: str = "") -> Path:
         "message": " ".join(str(message).split()),
         "time": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    path = atomic_write_json(Path(out_dir) / "status.json", record)
+    path = Path(out_dir) / "status.json"
+    try:
+        atomic_write_json(path, record)
+    except OSError:
+        if not path.is_file():
+            raise
+        # no room for a new file (no free inode, a full disk): the status still has to
+        # change, so it is written over the old one, in the blocks it already has
+        with open(path, "r+b") as fh:
+            fh.write((json.dumps(record, indent=2) + "\n").encode("utf-8"))
+            fh.truncate()
     refresh_manifest(Path(out_dir))
     return path

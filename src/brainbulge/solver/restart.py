@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import ngsolve as ngs
 import numpy as np
 
+from brainbulge.atomic import note_written
 from brainbulge.solver.options import Solution, StepRecord
 
 if TYPE_CHECKING:
@@ -39,6 +40,7 @@ def write(path: Path, key: str, form: MixedForm, x: ngs.BaseVector, t: float, dt
              steps=steps, rejected=sol.rejected_steps,
              **{f"lam{i}": v for i, v in enumerate(form.multiplier_state())})
     os.replace(tmp, path)
+    note_written(path)  # in the output folder's manifest
 
 
 def read(path: Path, key: str, form: MixedForm, sol: Solution

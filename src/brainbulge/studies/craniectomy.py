@@ -455,10 +455,11 @@ def run_study_with_report(out_dir: Path, scenarios: list[dict[str, Any]],
     """Run the scenarios on their shared meshes (:func:`attach_study_meshes`), then write
     ``table.csv``, ``comparison.png`` and ``report.md``; return how many completed."""
     from brainbulge.studies.runner import run_study
+    from brainbulge.studies.suites import FIELDS_FILE
 
     scenarios = attach_study_meshes(out_dir, scenarios)
     rows = run_study(scenarios, "brainbulge.studies.craniectomy:study_task", out_dir,
-                     scheduler=scheduler, n_workers=workers)
+                     scheduler=scheduler, n_workers=workers, outputs=(FIELDS_FILE,))
     from brainbulge.results.craniectomy_report import write_comparison, write_report
 
     write_comparison(out_dir, scenarios, rows)

@@ -52,12 +52,12 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import os
 import re
 import sys
 import traceback
 import uuid
-from collections.abc import Callable, Iterator, Mapping
+import zipfile
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -67,6 +67,12 @@ from tqdm.auto import tqdm
 from brainbulge.errors import InputError
 from brainbulge.results.output_folder import refresh_manifest
 from brainbulge.results.run_record import atomic_write_json
+from brainbulge.studies.cluster import (
+    THREAD_VARIABLES,
+    local_cluster,
+    shared_scheduler,
+    worker_env,
+)
 from brainbulge.studies.tasks import (
     Task,
     echo_task,
@@ -77,8 +83,8 @@ from brainbulge.studies.tasks import (
     to_json,
 )
 
-__all__ = ["SERIAL", "Task", "echo_task", "local_cluster", "run_study",
-           "shared_scheduler", "validate_scenarios"]
+__all__ = ["SERIAL", "THREAD_VARIABLES", "Task", "echo_task", "local_cluster", "run_study",
+           "shared_scheduler", "validate_scenarios", "worker_env"]
 
 logger = logging.getLogger(__name__)
 
@@ -92,24 +98,6 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
 RESERVED_NAMES = frozenset(
     {"study.json", "run.json", "run.toml", "status.json", "summary.json", "error.json"}
 )
-
-#: The thread-count variables of a worker process: BLAS/OpenMP/MKL (pypardiso), NGSolve's
-#: ``TaskManager`` and Numba (closed-form tangent).
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                    "NGS_NUM_THREADS", "NUMBA_NUM_THREADS")
-
-
-def worker_env(n_workers: int, cores: int | None = None) -> dict[str, str]:
-    """The thread counts of ``n_workers`` worker processes sharing ``cores`` cores (default:
-    those this process may use): ``cores // n_workers`` threads each, at least one, so that
-    the workers neither oversubscribe the cores nor leave them idle (one worker of a
-    paper-sized 3D scenario uses every core)."""
-    if cores is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-            os.cpu_count() or 1)
-    threads = str(max(1, cores // max(1, n_workers)))
-    return dict.fromkeys(THREAD_VARIABLES, threads)
-
 
 CONNECT_TIMEOUT = "10s"  #: how long to try to reach an existing Dask scheduler
 
@@ -172,10 +160,32 @@ def stopped_summary(scenario_dir: Path) -> dict[str, Any] | None:
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 
-def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any]) -> dict | None:
-    """The stored summary if the scenario finished before with the same parameters."""
+def _readable(path: Path) -> bool:
+    """``path`` is a complete file: an ``.npz`` whose members all pass their checksums, a
+    ``.json`` that parses, anything else not empty."""
+    try:
+        if path.suffix == ".npz":
+            with zipfile.ZipFile(path) as archive:
+                return archive.testzip() is None
+        if path.suffix == ".json":
+            json.loads(path.read_text(encoding="utf-8"))
+            return True
+        return path.stat().st_size > 0
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return False
+
+
+def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any],
+                      outputs: tuple[str, ...] = ()) -> dict | None:
+    """The stored summary if the scenario finished before with the same parameters and its
+    ``outputs`` (files the study reads afterwards) are all there and readable."""
     summary = _read_json(scenario_dir / SUMMARY_FILE)
     if not isinstance(summary, dict) or summary.get("complete") is not True:
+        return None
+    broken = [name for name in outputs if not _readable(scenario_dir / name)]
+    if broken:
+        logger.warning("scenario %s: %s missing or unreadable; recomputing it",
+                       scenario_json["name"], ", ".join(broken))
         return None
     stored = _read_json(scenario_dir / SCENARIO_FILE)
     if stored is not None and stored != scenario_json:
@@ -187,31 +197,14 @@ def _finished_summary(scenario_dir: Path, scenario_json: dict[str, Any]) -> dict
     return summary
 
 
-@contextlib.contextmanager
-def _worker_environ(env: Mapping[str, str]) -> Iterator[None]:
-    """Set ``env`` in ``os.environ`` while worker processes are spawned, then restore it.
-
-    `distributed.Nanny` reads ``OMP_NUM_THREADS`` & co. from ``os.environ`` before spawning
-    (they must be set before numpy loads BLAS); an inherited ``OMP_NUM_THREADS=8`` would win.
-    """
-    saved = {key: os.environ.get(key) for key in env}
-    os.environ.update(env)
-    try:
-        yield
-    finally:
-        for key, old in saved.items():
-            if old is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = old
-
-
 class _Study:
     """Bookkeeping of one `run_study` call: records, statuses and ``study.json``."""
 
-    def __init__(self, scenarios: list[dict[str, Any]], out_dir: Path) -> None:
+    def __init__(self, scenarios: list[dict[str, Any]], out_dir: Path,
+                 outputs: tuple[str, ...] = ()) -> None:
         self.scenarios = scenarios
         self.out_dir = out_dir
+        self.outputs = outputs
         self.results: list[dict[str, Any] | None] = [None] * len(scenarios)
         self.status = ["pending"] * len(scenarios)
         self.resumed = [False] * len(scenarios)
@@ -225,7 +218,7 @@ class _Study:
         pending = []
         for i, scenario in enumerate(self.scenarios):
             folder = self.scenario_dir(i)
-            summary = _finished_summary(folder, scenario)
+            summary = _finished_summary(folder, scenario, self.outputs)
             if summary is not None:
                 self.results[i], self.status[i], self.resumed[i] = summary, "complete", True
                 continue
@@ -291,6 +284,7 @@ def run_study(
     n_workers: int | None = None,
     progress: bool = True,
     cost: Callable[[dict[str, Any]], float] | None = None,
+    outputs: tuple[str, ...] = (),
 ) -> list[dict[str, Any]]:
     """Run ``task(scenario, out_dir / name)`` for every scenario; return the summaries in input
     order.
@@ -326,6 +320,10 @@ def run_study(
         scenarios start in order of decreasing cost (Dask task priorities), so that the
         longest do not start last and leave one worker busy while the others idle; serial
         runs keep the input order.
+    outputs
+        Files of a scenario's folder that the caller reads afterwards (e.g. ``fields.npz``
+        for figures): a scenario finished before whose outputs are missing or unreadable
+        (truncated, a failed checksum) is run again.
 
     Raises
     ------
@@ -342,7 +340,7 @@ def run_study(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
 
-    study = _Study(normalised, out_dir)
+    study = _Study(normalised, out_dir, tuple(outputs))
     pending = study.load_finished()
     study.write()
     if len(pending) < len(scenarios):
@@ -385,46 +383,6 @@ def _finish(study: _Study, bar: Any, i: int, outcome: dict[str, Any]) -> None:
         bar.set_postfix(failed=n_failed)
     logger.info("study %s: %d of %d scenarios finished (%d failed)", study.out_dir.name,
                 len(study.status) - study.status.count("pending"), len(study.status), n_failed)
-
-
-@contextlib.contextmanager
-def local_cluster(n_workers: int | None = None) -> Iterator[str]:
-    """A `distributed.LocalCluster` of ``n_workers`` (default 2) worker processes, one
-    scenario at a time each, with the thread counts of :func:`worker_env`; closed on exit;
-    yields its scheduler address.
-
-    `run_study` starts one per study when ``scheduler`` is None; a command that runs several
-    studies in a row passes this address to each of them instead, so that the workers start
-    (and import brainbulge and NGSolve) once. Its HTTP server takes a free port, so a second
-    cluster on the machine does not clash with the first."""
-    import importlib.util
-
-    from distributed import LocalCluster
-
-    if n_workers is not None and n_workers < 1:
-        raise InputError(f"n_workers must be at least 1, not {n_workers}")
-    n_workers = n_workers or 2
-    env = worker_env(n_workers)
-    with _worker_environ(env):
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", env=env)
-    with cluster:
-        if importlib.util.find_spec("bokeh"):
-            logger.info("Dask dashboard: %s", cluster.dashboard_link)
-        yield cluster.scheduler_address
-
-
-@contextlib.contextmanager
-def shared_scheduler(scheduler: str | None, n_workers: int | None = None
-                     ) -> Iterator[str | None]:
-    """``scheduler`` for several studies in a row: a :func:`local_cluster` of ``n_workers``
-    started once when it is None, otherwise ``scheduler`` itself (``"serial"`` or an
-    address)."""
-    if scheduler is not None:
-        yield scheduler
-        return
-    with local_cluster(n_workers) as address:
-        yield address
 
 
 def _run_distributed(

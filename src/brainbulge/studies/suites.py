@@ -21,6 +21,8 @@ from typing import Any
 from brainbulge.geometry.brain.defaults import LARGE_TETS
 
 STUDIES = ("hemidisk-sector", "hemidisk-disk", "craniectomy")
+#: the file of each scenario that a study's figures read (recomputed on resume if it is lost)
+FIELDS_FILE = "fields.npz"
 
 #: default 3D mesh size of the reproduction: Netgen at ~181k tets, refined once to ~1.4M
 #: (the paper: 1,275,808 tets)
@@ -47,7 +49,8 @@ def run_named_study(name: str, scenarios: list[dict], out: Path, scheduler: str 
     from brainbulge.studies.runner import run_study
 
     rows = run_study(scenarios, "brainbulge.studies.hemidisk:study_task", out,
-                     scheduler=scheduler, n_workers=workers, cost=hd.expected_cost)
+                     scheduler=scheduler, n_workers=workers, cost=hd.expected_cost,
+                     outputs=(FIELDS_FILE,))
     hd.write_study_table(rows, scenarios, out / "table.csv")
     if name == "hemidisk-sector":
         from brainbulge.studies.trends import write_sector_report

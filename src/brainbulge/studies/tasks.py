@@ -11,6 +11,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path, PurePath
 from typing import Any
 
+from brainbulge.atomic import note_written
 from brainbulge.errors import BrainbulgeError, InputError
 from brainbulge.results.run_record import atomic_write_json
 
@@ -103,6 +104,7 @@ def execute_on_worker(task: Task, scenario: dict[str, Any], scenario_dir: str) -
         handler = logging.FileHandler(Path(scenario_dir) / SCENARIO_LOG)
     except OSError:  # no log file is no reason to lose the scenario
         return execute(task, scenario, scenario_dir)
+    note_written(Path(scenario_dir) / SCENARIO_LOG, tracked=False)  # it grows as it runs
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     log.addHandler(handler)

@@ -10,7 +10,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
-from brainbulge.atomic import atomic_output, atomic_write_text
+from brainbulge.atomic import atomic_output, atomic_write_text, note_written
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain.boundaries import Flap, SuperiorBand
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
@@ -108,6 +108,9 @@ def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = Non
         paths.pop("xdmf")
     else:  # in place: its heavy data goes to brain.h5, which the file names
         mm.write(paths["xdmf"])
+        for written in (paths["xdmf"], paths["xdmf"].with_suffix(".h5")):
+            if written.is_file():
+                note_written(written)  # in the output folder's manifest
     with atomic_output(paths["npz"]) as tmp:
         _save_npz(tmp, mesh)
     summary = brain_summary(mesh)

@@ -16,23 +16,50 @@ import numpy as np
 from brainbulge.errors import InputError
 
 
+def check_shape(shape: tuple[int, ...], path: str | Path) -> None:
+    """A fibre image's shape (from its header) must be (nx, ny, nz, 3), axes of length 1
+    aside."""
+    dims = tuple(n for n in shape if n != 1)
+    if len(dims) != 4 or dims[3] != 3:
+        raise InputError(
+            f"fibre image {path} has shape {tuple(shape)}; expected (nx, ny, nz, 3), a unit "
+            "vector per voxel (e.g. DTI V1)")
+
+
+def check_fibres(path: str | Path) -> None:
+    """Read only ``path``'s header: a NIfTI of the shape `check_shape` wants, whose data
+    fits in memory. For checking a command's inputs before it starts."""
+    import nibabel as nib
+
+    from brainbulge.geometry.brain.labels import check_declared_size
+
+    try:
+        img = nib.load(str(path))
+    except Exception as err:  # noqa: BLE001 - nibabel raises several types
+        raise InputError(f"cannot read fibre image {path}: {type(err).__name__}; give a "
+                         "NIfTI file (.nii/.nii.gz) of shape (nx, ny, nz, 3)") from None
+    check_shape(img.shape, path)
+    check_declared_size(img, path, "fibre image", work_bytes_per_voxel=8)
+
+
 class FibreField:
     """Unit axon directions at world points (mm), read from a vector NIfTI."""
 
     def __init__(self, path: str | Path, centre_mm: np.ndarray) -> None:
         import nibabel as nib
 
+        from brainbulge.geometry.brain.labels import check_declared_size
+
         try:
             img = nib.load(str(path))
-            data = np.asarray(img.dataobj, dtype=np.float32)
         except Exception as err:  # nibabel raises several types for unreadable files
             raise InputError(f"cannot read fibre image {path}: {err}; give a NIfTI file") from None
-        data = np.squeeze(data)
-        if data.ndim != 4 or data.shape[3] != 3:
-            raise InputError(
-                f"fibre image {path} has shape {data.shape}; expected (nx, ny, nz, 3), a unit "
-                "vector per voxel (e.g. DTI V1)"
-            )
+        check_shape(img.shape, path)
+        check_declared_size(img, path, "fibre image", work_bytes_per_voxel=8)
+        try:
+            data = np.squeeze(np.asarray(img.dataobj, dtype=np.float32))
+        except Exception as err:  # noqa: BLE001 - truncated data
+            raise InputError(f"cannot read fibre image {path}: {err}; give a NIfTI file") from None
         if not np.all(np.isfinite(data)):
             raise InputError(f"fibre image {path} holds NaN or infinite values; mask them to 0")
         self.data = data

@@ -19,6 +19,8 @@ listed (and 0) are background.
 from __future__ import annotations
 
 import json
+import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +54,47 @@ LABEL_MAP_PRESETS: dict[str, dict[str, list[int]]] = {
     "synthseg": _ASEG,
     "gmwmcsf": {"csf": [1], "gray": [2], "white": [3]},
 }
+
+
+#: working memory per voxel of a label image beyond its own bytes [bytes]: the int64 copy,
+#: np.unique's sorted copy, the tissue array and np.isin's masks
+WORK_BYTES_PER_VOXEL = 24
+
+
+def available_memory_bytes() -> int | None:
+    """Memory this machine can still give [bytes] (``MemAvailable``; free pages elsewhere),
+    None if unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def check_declared_size(img: object, path: str | Path, what: str,
+                        work_bytes_per_voxel: int = WORK_BYTES_PER_VOXEL) -> None:
+    """Refuse (`InputError`) a NIfTI image whose header declares more voxels than the memory
+    available can read and process (e.g. a corrupt or hostile header on a small file), before
+    any of it is read."""
+    shape = tuple(int(n) for n in getattr(img, "shape", ()))
+    try:
+        itemsize = np.dtype(img.get_data_dtype()).itemsize  # type: ignore[attr-defined]
+    except (AttributeError, TypeError):
+        itemsize = 8
+    need = math.prod(shape) * (itemsize + work_bytes_per_voxel)
+    free = available_memory_bytes()
+    if free is not None and need > free:
+        dims = " x ".join(str(n) for n in shape)
+        raise InputError(
+            f"{what} {path} declares {dims} voxels: {need / 1e9:.1f} GB to read and process, "
+            f"but {free / 1e9:.1f} GB of memory is available; check its header (a brain "
+            "segmentation is about 256 x 256 x 256 voxels) or crop it")
 
 
 @dataclass
@@ -114,9 +157,16 @@ def read_label_map(label_map: str | Path | dict[str, list[int]]) -> dict[str, li
         if not mapping.get(name):
             raise InputError(f"label map gives no codes for {name!r}: add its label codes")
     try:
-        return {name: [int(c) for c in codes] for name, codes in mapping.items()}
+        codes = {name: [int(c) for c in codes] for name, codes in mapping.items()}
     except (TypeError, ValueError):
         raise InputError('label map codes must be integers, e.g. {"gray": [3, 42]}') from None
+    owner: dict[int, str] = {}
+    for name, values in codes.items():
+        for code in values:
+            if owner.setdefault(code, name) != name:
+                raise InputError(f"label map lists code {code} in both {owner[code]!r} and "
+                                 f"{name!r}; give each code to one tissue")
+    return codes
 
 
 def tissue_image_from_labels(
@@ -171,8 +221,15 @@ def load_tissue_image(
 
     try:
         img = nib.load(str(path))
-        data = np.asanyarray(img.dataobj)
     except Exception as err:  # nibabel raises many types for unreadable files
+        raise InputError(
+            f"cannot read label image {path}: {type(err).__name__}; "
+            "give a NIfTI file (.nii/.nii.gz)"
+        ) from None
+    check_declared_size(img, path, "label image")
+    try:
+        data = np.asanyarray(img.dataobj)
+    except Exception as err:  # noqa: BLE001 - truncated data, a header that lies
         raise InputError(
             f"cannot read label image {path}: {type(err).__name__}; "
             "give a NIfTI file (.nii/.nii.gz)"

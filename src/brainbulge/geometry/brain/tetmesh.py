@@ -142,11 +142,13 @@ def _netgen_tets(envelope: IntracranialEnvelope, h_mm: float, step: int, optstep
     if not hasattr(os, "fork"):  # pragma: no cover - Windows: run in this process
         return _netgen_tets_here(envelope, h_mm, step, optsteps)
     read_fd, write_fd = os.pipe()
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:  # child: mesh, send the arrays, leave without cleanup handlers
         import faulthandler
 
         faulthandler.disable()  # a Netgen abort here is expected and reported by the parent
+        _end_with(parent)
         os.close(read_fd)
         code = 0
         try:
@@ -164,6 +166,25 @@ def _netgen_tets(envelope: IntracranialEnvelope, h_mm: float, step: int, optstep
         log.warning("netgen: the meshing process failed (status %d)", status)
         return empty
     return pickle.loads(data)
+
+
+def _end_with(parent: int) -> None:
+    """In a forked child: end on the signals that stop a command (not the parent's Python
+    handlers, which run only between bytecodes and so never inside Netgen), and when the
+    ``parent`` process ends, however it ends (Linux: ``PR_SET_PDEATHSIG``)."""
+    import os
+    import signal
+
+    for signum in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+        signal.signal(signum, signal.SIG_DFL)
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        pass
+    if os.getppid() != parent:  # the parent ended before the call above
+        os._exit(1)
 
 
 def _netgen_tets_here(envelope: IntracranialEnvelope, h_mm: float, step: int, optsteps: int
