@@ -202,6 +202,9 @@ def test_demo_report_opens_offline_and_every_view_draws_in_chromium(quick_demo) 
                        " s.value = 'transverse'; s.dispatchEvent(new Event('change')); })()")
             cut = b.screenshot(view + " canvas.bbcanvas")
             assert np.abs(cut - other).mean() > 0.01, "cutting open did not change the picture"
+            b.evaluate(f"document.querySelector('{view} input.bbundeformed').click()")
+            undeformed = b.screenshot(view + " canvas.bbcanvas")
+            assert np.abs(undeformed - cut).mean() > 0.002, "no undeformed outline"
         # a click on a header sorts a table by that column
         order = b.evaluate(
             "(() => { const t = document.querySelectorAll('table.sortable')[0];"

@@ -55,10 +55,10 @@ def range_note(field: str, from_zero: bool = False) -> str:
     the range of a field not centred on 1 starts at 0 instead (3D views)."""
     lo, hi = RANGE_PERCENTILES
     if centred_on_one(field):
-        return f"centred on 1, to the farther of the {lo:g}th and {hi:g}th percentiles"
+        return f"centred on 1, {lo:g}-{hi:g}th percentiles"
     if from_zero:
         return f"0 to the {hi:g}th percentile"
-    return f"{lo:g}th to {hi:g}th percentile"
+    return f"{lo:g}-{hi:g}th percentiles"
 
 
 def centred_on_one(field: str) -> bool:
@@ -164,9 +164,9 @@ def plot_grid(
             if j == 0:
                 ax.text(-1.25, 0.5, f"{row_label} = {rv:g}", fontsize=8, rotation=90, va="center")
     if im is not None:
-        fig.colorbar(im, ax=axes, shrink=0.6,
-                     label=f"{LABELS.get(field, field)}\n({range_note(field)}, shared)")
-    fig.suptitle(title or LABELS.get(field, field), fontsize=10)
+        fig.colorbar(im, ax=axes, shrink=0.6, label=LABELS.get(field, field))
+    fig.suptitle(f"{title or LABELS.get(field, field)}\n(colour range shared: "
+                 f"{range_note(field)})", fontsize=10)
     return _save(fig, path)
 
 
@@ -182,9 +182,9 @@ def plot_row(
         _outline(ax, vf)
         ax.set_title(label, fontsize=8)
     if im is not None:
-        fig.colorbar(im, ax=axes, shrink=0.7,
-                     label=f"{LABELS.get(field, field)}\n({range_note(field)}, shared)")
-    fig.suptitle(title or LABELS.get(field, field), fontsize=10)
+        fig.colorbar(im, ax=axes, shrink=0.7, label=LABELS.get(field, field))
+    fig.suptitle(f"{title or LABELS.get(field, field)} (colour range shared: "
+                 f"{range_note(field)})", fontsize=10)
     return _save(fig, path)
 
 

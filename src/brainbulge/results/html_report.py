@@ -94,7 +94,7 @@ def markdown_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> str
     if not found:
         extra = "".join(study_views_html(d, f"v{next(count)}") for d in (
             sorted({p.parent.parent for p in root.glob("**/surface.npz")
-                    if len(p.relative_to(root).parts) <= REPORT_DEPTH + 1})))
+                    if 2 <= len(p.relative_to(root).parts) <= REPORT_DEPTH + 1})))
         if extra:
             body += "<h2>3D views</h2>\n" + extra
     return INTRO + body if "bbview" in body else body

@@ -217,11 +217,16 @@ def plot_surface_views(s: Surface, path: str | Path, title: str = "",
                                     "from the flap", transform=axes[row][col].transAxes,
                                     rotation=90, ha="right", va="center", fontsize=9)
         fig.colorbar(m, ax=[axes[r][col] for r in range(len(VIEWS))], orientation="horizontal",
-                     shrink=0.8, label=(LABELS.get(field, label) if field != "u_magnitude"
-                                        else label) + f"\n({range_note(field, from_zero=True)})")
-    if title:
-        fig.suptitle(title, fontsize=11)
+                     shrink=0.8, label=LABELS.get(field, label) if field != "u_magnitude"
+                     else label)
+    fig.suptitle((f"{title}\n" if title else "") + ranges_note(), fontsize=10)
     return _save(fig, path, dpi=dpi, bbox_inches=None)
+
+
+def ranges_note() -> str:
+    """How :func:`shared_ranges` chooses the colour ranges, for a figure's title."""
+    return (f"colour ranges: |u| and strain {range_note('u_magnitude', from_zero=True)}, "
+            f"stretches {range_note('lambda_n')}")
 
 
 def shared_ranges(surfaces: Sequence[Surface]) -> dict[str, tuple[float, float]]:
@@ -257,9 +262,9 @@ def plot_study_surfaces(surfaces: dict[str, Surface], path: str | Path, view: st
                 axes[row][col].text(-0.05, 0.5, name, transform=axes[row][col].transAxes,
                                     rotation=90, ha="right", va="center", fontsize=8)
         fig.colorbar(m, ax=[axes[r][col] for r in range(n)], orientation="horizontal",
-                     shrink=0.8, aspect=30, label=f"{label}\n({range_note(field, from_zero=True)})")
+                     shrink=0.8, aspect=30, label=label)
     fig.suptitle(f"deformed surface seen {'from above' if view == 'above' else 'from the flap'}"
-                 " (colour ranges shared by the scenarios)", fontsize=10)
+                 f"\n{ranges_note()}, shared by the scenarios", fontsize=10)
     return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 

@@ -175,8 +175,8 @@ def brain_scene(s: Surface, ranges: Mapping[str, tuple[float, float]], title: st
     layers = [
         mesh_layer(s.points, s.u, s.faces, {k: s.fields[k] for k in fields}, name="surface",
                    modes=surface_modes, clip=True),
-        mesh_layer(s.points, None, s.faces, name="undeformed surface", modes=surface_modes,
-                   clip=True, undeformed=True, **UNDEFORMED),
+        {"like": 0, "name": "undeformed surface", "modes": surface_modes, "clip": True,
+         "undeformed": True, **UNDEFORMED},
     ]
     if len(s.rim):
         layers.append(line_layer(s.points, s.u, s.rim, name="flap rim", modes=surface_modes,

@@ -3,7 +3,8 @@
  *
  * A scene (JSON in <script type="application/json" id=...>, arrays base64 encoded) is a list
  * of layers: triangle meshes (reference positions X, displacement U, triangles T, per-vertex
- * values per field, or one colour) and line sets (X, U, edges E). A layer shows in the modes
+ * values per field, or one colour) and line sets (X, U, edges E); a layer with "like": i
+ * takes X and T (or E) of layer i, not its U or values. A layer shows in the modes
  * it names, is cut by the mode's clip plane when it says "clip", and shows only with the
  * "undeformed" box ticked when it is "undeformed". Every <div class="bbview" data-scene=id>
  * becomes a view when it first scrolls near the screen; window.brainbulgeViews lists them
@@ -197,10 +198,11 @@
 
     // layers -> buffers
     this.layers = scene.layers.map(function (L) {
-      var X = decode(L.X, Float32Array);
+      var src = L.like === undefined ? L : scene.layers[L.like]; // X and T of an earlier layer
+      var X = decode(src.X, Float32Array);
       var U = L.U ? decode(L.U, Float32Array) : new Float32Array(X.length);
-      var lines = !!L.E;
-      var idx = decode(lines ? L.E : L.T, Uint32Array);
+      var lines = !!src.E;
+      var idx = decode(lines ? src.E : src.T, Uint32Array);
       var P = new Float32Array(X.length);
       for (var i = 0; i < X.length; i++) P[i] = X[i] + U[i];
       var N = lines ? new Float32Array(X.length) : vertexNormals(P, idx);
