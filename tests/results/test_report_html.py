@@ -104,6 +104,33 @@ def test_decimation_keeps_small_surfaces_and_bounds_large_ones() -> None:
     assert MAX_VIEW_FACES >= 25_000  # a 21k-tet brain's surface is shown whole
 
 
+def test_a_page_of_six_paper_sized_scenarios_stays_small() -> None:
+    """A 1.4M-tet brain's surface has ~200k triangles and its sections ~40k each: decimated,
+    six scenarios' views take under 15 MB (the page's budget is about 20 MB with figures)."""
+    from scipy.spatial import Delaunay
+
+    from brainbulge.results.webview import MAX_CUT_FACES, brain_scene, views_html
+
+    p, faces = sphere(60_000)
+    rng = np.random.default_rng(1)
+    disk = rng.uniform(-45, 45, size=(25_000, 2))
+    disk = disk[np.linalg.norm(disk, axis=1) < 45]
+    tri = Delaunay(disk).simplices
+    cut_pts = np.column_stack([disk, np.zeros(len(disk))])
+    fields = {k: 1 + 0.01 * p[:, 0] for k in ("u_magnitude", "lambda_n", "lambda_t", "Je",
+                                               "max_principal_strain")}
+    cut = Cut(cut_pts, tri, np.zeros_like(cut_pts), {k: np.ones(len(disk)) for k in fields})
+    big = Surface(p, faces, 0.01 * p, fields, np.zeros(len(faces), bool), np.array([1.0, 0, 0]),
+                  cuts={"transverse": cut, "sagittal": cut}, cut_centre=np.zeros(3))
+    assert len(faces) > 100_000 and len(tri) > 2 * MAX_CUT_FACES
+    scene = brain_scene(big, shared_ranges([big]))
+    n_tri = {L["name"]: len(decoded(L, "T", np.uint32)) // 3 for L in scene["layers"] if "T" in L}
+    assert 10_000 < n_tri["surface"] <= MAX_VIEW_FACES
+    assert n_tri["transverse section"] <= MAX_CUT_FACES
+    page = views_html([scene] * 6, "big")
+    assert len(page) < 15e6
+
+
 # --- the Markdown page -----------------------------------------------------------------
 @pytest.fixture
 def report_folder(tmp_path: Path) -> Path:

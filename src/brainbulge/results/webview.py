@@ -11,8 +11,8 @@ field of :data:`~brainbulge.results.views3d.VIEW_FIELDS` (colour maps as in the 
 from :func:`~brainbulge.results.views3d.shared_ranges`, shared by the scenarios of a page),
 the flap's rim, the transverse and sagittal sections (shown alone, or with the surface
 clipped at their plane), and the undeformed surface and section outlines on demand. Surfaces
-over :data:`MAX_VIEW_FACES` triangles are decimated (:func:`decimate`) so that a page of six
-scenarios stays small.
+over :data:`MAX_VIEW_FACES` triangles (sections over :data:`MAX_CUT_FACES`) are decimated
+(:func:`decimate`) so that a page of six scenarios stays small.
 """
 
 from __future__ import annotations
@@ -33,9 +33,11 @@ from brainbulge.results.figures import CMAPS, range_note
 from brainbulge.results.sections import boundary_edges
 from brainbulge.results.views3d import VIEW_FIELDS, Surface, shared_ranges, view_frame
 
-#: the most triangles of one surface or section in a view; larger ones are decimated by
-#: vertex clustering (a 21k-tet brain's parenchyma surface has about 25k)
-MAX_VIEW_FACES = 60_000
+#: the most triangles of a surface (and of a section) in a view; larger ones are decimated
+#: by vertex clustering (a 21k-tet brain's parenchyma surface has 5.6k, its sections 1-2k),
+#: so that six scenarios of a paper-sized mesh take about 2 MB each
+MAX_VIEW_FACES = 30_000
+MAX_CUT_FACES = 8_000
 #: what a scenario's view can show: (mode, label, the preset view it turns to); a layer
 #: names the modes it shows in. The transverse cut takes away the tissue above its plane,
 #: the sagittal cut that on the patient's right ("other half": the other side)
@@ -90,10 +92,11 @@ def decimate(points: np.ndarray, faces: np.ndarray, max_faces: int = MAX_VIEW_FA
 
 
 def mesh_layer(X: np.ndarray, U: np.ndarray | None, T: np.ndarray,
-               values: Mapping[str, np.ndarray] | None = None, **spec: Any) -> dict[str, Any]:
-    """A triangle layer of the used (and, if large, decimated) vertices; ``spec``: the
+               values: Mapping[str, np.ndarray] | None = None,
+               max_faces: int = MAX_VIEW_FACES, **spec: Any) -> dict[str, Any]:
+    """A triangle layer of the used vertices (decimated to ``max_faces``); ``spec``: the
     viewer's ``modes``, ``clip``, ``undeformed``, ``color``, ``alpha``."""
-    keep, tri = decimate(X, T)
+    keep, tri = decimate(X, T, max_faces)
     layer = {"X": _b64(np.asarray(X)[keep], np.float32), "T": _b64(tri, np.uint32),
              "values": {k: _b64(np.asarray(v)[keep], np.float32)
                         for k, v in (values or {}).items()}, **spec}
@@ -187,7 +190,8 @@ def brain_scene(s: Surface, ranges: Mapping[str, tuple[float, float]], title: st
             continue
         layers.append(mesh_layer(c.points, c.u, c.triangles,
                                  {k: c.fields[k] for k in fields if k in c.fields},
-                                 name=f"{plane} section", modes=[plane, "sections"]))
+                                 MAX_CUT_FACES, name=f"{plane} section",
+                                 modes=[plane, "sections"]))
         layers.append(line_layer(c.points, None, boundary_edges(c.triangles),
                                  name=f"{plane} section, undeformed outline",
                                  modes=[plane, "sections"], undeformed=True, color=RIM_COLOUR))
