@@ -243,3 +243,9 @@ def test_demo_report_opens_offline_and_every_view_draws_in_chromium(quick_demo) 
         assert b.errors() == []
         remote = [u for u in b.requests() if not u.startswith(("file:", "data:"))]
         assert remote == [], f"the page requested {remote}"
+        # a scenario's own page draws too
+        b.open(brain[0] / "view.html")
+        b.evaluate("document.querySelector('.bbview').scrollIntoView()")
+        assert b.wait_for("brainbulgeViews.length && brainbulgeViews[0].frames > 0")
+        assert (b.screenshot("canvas.bbcanvas").min(axis=2) < 0.9).mean() > 0.15
+        assert b.errors() == []

@@ -30,7 +30,7 @@ import numpy as np
 
 from brainbulge.atomic import atomic_output
 from brainbulge.results.figures import CMAPS, range_note
-from brainbulge.results.sections import boundary_edges
+from brainbulge.results.sections import PLANES, boundary_edges
 from brainbulge.results.views3d import VIEW_FIELDS, Surface, shared_ranges, view_frame
 
 #: the most triangles of a surface (and of a section) in a view; larger ones are decimated
@@ -195,7 +195,7 @@ def brain_scene(s: Surface, ranges: Mapping[str, tuple[float, float]], title: st
         layers.append(line_layer(c.points, None, boundary_edges(c.triangles),
                                  name=f"{plane} section, undeformed outline",
                                  modes=[plane, "sections"], undeformed=True, color=RIM_COLOUR))
-        normal = np.eye(3)[{"transverse": 2, "sagittal": 0}[plane]]
+        normal = np.eye(3)[PLANES[plane][0]]
         clip[plane] = [*normal.tolist(), float(normal @ np.asarray(s.cut_centre, float))]
     modes = [m for m in MODES if m[0] == "surface" or m[0] in clip
              or (m[0] == "sections" and clip)]
