@@ -97,7 +97,9 @@ def markdown_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> str
                     if 2 <= len(p.relative_to(root).parts) <= REPORT_DEPTH + 1})))
         if extra:
             body += "<h2>3D views</h2>\n" + extra
-    return INTRO + body if "bbview" in body else body
+    if "bbview" not in body:
+        return body
+    return body.replace("</h1>\n", "</h1>\n" + INTRO, 1) if "</h1>" in body else INTRO + body
 
 
 def write_report_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> Path:
