@@ -206,7 +206,7 @@ def test_study_surfaces_share_one_colour_range_per_field(toy_run, tmp_path: Path
     double.fields["u_magnitude"] *= 2
     ranges = shared_ranges([s, double])
     assert ranges["u_magnitude"][1] == pytest.approx(
-        np.percentile(double.fields["u_magnitude"], 99.5))
+        np.percentile(double.surface_values("u_magnitude"), 99.5))
     lo, hi = ranges["lambda_n"]
     assert lo + hi == pytest.approx(2.0)  # symmetric about 1
     for name, surf in (("a", s), ("b", double)):

@@ -187,6 +187,35 @@ def test_plan_writes_its_table_figures_and_report(plan) -> None:
     assert "**c00-d" in report and "134.8" in report and "12 cm" in report
 
 
+def test_the_plan_page_draws_every_flap_where_it_lies(plan) -> None:
+    """``report.html``: the head with each plan's flap outline coloured by each damage
+    measure (the plan's own values), the recommended flap highlighted; the larger flap's
+    outline lies farther from the centre, about at its radius."""
+    import base64
+
+    out, cases, rows = plan
+    page = (out / "report.html").read_text()
+    scene = json.loads(re.search(r'<script type="application/json" id="plan-0">(.*?)</script>',
+                                 page, re.S).group(1))
+    layers = {layer["name"]: layer for layer in scene["layers"]}
+    best = re.search(r"\*\*(c\d\d-d\d+)\*\*", (out / "report.md").read_text()).group(1)
+    assert {"head", "flaps", f"recommended {best}"} <= set(layers)
+
+    def arr(b64: str) -> np.ndarray:
+        return np.frombuffer(base64.b64decode(b64), dtype=np.float32)
+
+    pts = arr(layers["flaps"]["X"]).reshape(-1, 3)
+    bulge = arr(layers["flaps"]["values"]["max_displacement_mm"])
+    assert set(scene["fields"]) >= {"strained_volume_ml", "abs_midline_shift_mm"}
+    centre = np.array([cases[0].extra["centre_on_skull_mm"]], float)
+    reach = {}
+    for c in cases:
+        mine = np.isclose(bulge, rows[c.name]["max_displacement"], rtol=1e-6)
+        assert mine.any()
+        reach[c.flap_diameter_mm] = np.linalg.norm(pts[mine] - centre, axis=1).mean()
+    assert SMALL / 2 * 0.6 < reach[SMALL] < reach[LARGE] < LARGE / 2 * 1.4
+
+
 def test_the_larger_flap_starts_from_the_smaller_one_and_lowers_the_bulge(plan) -> None:
     _, _, rows = plan
     small, large = rows["c00-d70"], rows["c00-d80"]

@@ -303,8 +303,10 @@ def start_run(args: argparse.Namespace, config: dict[str, Any], resume: bool = F
 
 
 def finish_run(out: Path, message: str = "") -> None:
+    from brainbulge.results.html_report import write_missing_html
     from brainbulge.results.run_record import mark_status
 
+    write_missing_html(out)  # report.html next to each report.md written without one
     mark_status(out, "complete", message)
     print(f"results in {out}")
 

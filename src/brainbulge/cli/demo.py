@@ -3,8 +3,9 @@
 Runs the hemidisk headline case (alpha 80, beta 60, Js 1.2) with both contact conditions,
 a small sector sweep, the six 3D craniectomy scenarios ({left unilateral, frontal} flap x
 {both, left, right} white-matter swelling, Js 1.1) on a coarse ICBM152 brain, and writes
-``report.md`` with the figures and tables. ``--quick`` shrinks everything for a smoke test
-(two 3D scenarios).
+``report.md`` with the figures and tables and ``report.html``, the same as one page that opens
+offline in a browser, with an interactive 3D view of each deformed brain. ``--quick`` shrinks
+everything for a smoke test (two 3D scenarios).
 """
 
 from __future__ import annotations
@@ -56,5 +57,5 @@ def run_command(args: argparse.Namespace) -> int:
     report = write_demo_report(out, headline, sweep, brain)
     total = len(headline) + len(sweep) + len(brain)
     finish_run(out, f"{ok1 + ok2 + ok3} of {total} scenarios complete")
-    print(f"report: {report}")
+    print(f"report: {report.with_suffix('.html')} (open it in a browser) and {report.name}")
     return 0

@@ -1,10 +1,12 @@
-"""A craniectomy study's ``table.csv``, ``comparison.png`` and ``report.md``: the scenarios'
-clinical measures side by side, each scenario's sections and the study's surface views."""
+"""A craniectomy study's ``table.csv``, ``comparison.png``, ``report.md`` and ``report.html``:
+the scenarios' clinical measures side by side, each scenario's sections and the study's
+surface views (interactive in ``report.html``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from brainbulge.results.html_report import views_marker, write_report_html
 from brainbulge.results.run_record import atomic_output, atomic_write_text
 from brainbulge.results.views3d import write_study_surfaces
 
@@ -57,7 +59,8 @@ def write_comparison(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> 
 
 
 def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path:
-    """``report.md``: the comparison table and figure, and each scenario's sections."""
+    """``report.md``: the comparison table and figure, and each scenario's sections; and
+    ``report.html``, with the scenarios' interactive 3D views."""
     out_dir = Path(out_dir)
     lines = [
         "# Craniectomy scenarios",
@@ -76,7 +79,7 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
             continue
         vals = " | ".join(f"{float(r.get(k) or 0):.4g}" for k in COMPARISON)
         lines.append(f"| {sc['name']} | {vals} |")
-    lines += ["", "![comparison](comparison.png)", ""]
+    lines += ["", "![comparison](comparison.png)", "", views_marker("."), ""]
     for view in write_study_surfaces(out_dir, [sc["name"] for sc, r in zip(scenarios, rows,
                                                                           strict=True)
                                                if r.get("complete")]):
@@ -84,4 +87,6 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
     for sc, r in zip(scenarios, rows, strict=True):
         if r.get("complete"):
             lines += [f"## {sc['name']}", "", f"![{sc['name']}]({sc['name']}/sections.png)", ""]
-    return atomic_write_text(out_dir / "report.md", "\n".join(lines))
+    atomic_write_text(out_dir / "report.md", "\n".join(lines))
+    write_report_html(out_dir / "report.md")
+    return out_dir / "report.md"

@@ -23,8 +23,14 @@ LABELS = {
     "max_principal_strain": "max principal strain",
     "pressure": "pressure [kPa]",
     "J": "J",
+    "Je": r"elastic volume ratio $J_e = J/J_s$",
 }
-CMAPS = {"lambda_n": "RdBu_r", "lambda_t": "RdBu_r", "pressure": "coolwarm"}
+#: fields drawn on a diverging scale centred on 1 (no deformation), symmetric about it
+CENTRED_ON_ONE = ("lambda_n", "lambda_t", "Je")
+CMAPS = {**dict.fromkeys(CENTRED_ON_ONE, "RdBu_r"), "pressure": "coolwarm"}
+#: the percentiles of a field's values that set its colour range (the extremes of a few
+#: nodes at a singular point would wash out the rest)
+RANGE_PERCENTILES = (0.5, 99.5)
 
 
 def _triangulation(vf: VertexFields, deformed: bool, mask: np.ndarray | None = None):
@@ -33,12 +39,32 @@ def _triangulation(vf: VertexFields, deformed: bool, mask: np.ndarray | None = N
 
 
 def _limits(field: str, values: Sequence[np.ndarray]) -> tuple[float, float]:
-    lo = min(float(np.percentile(v, 0.5)) for v in values)
-    hi = max(float(np.percentile(v, 99.5)) for v in values)
-    if field.startswith("lambda"):  # symmetric about 1: stretch red, compression blue
+    """One colour range for ``field`` over all ``values`` (arrays): from the lowest to the
+    highest of their :data:`RANGE_PERCENTILES`, symmetric about 1 for
+    :data:`CENTRED_ON_ONE` fields (stretch red, compression blue)."""
+    lo = min(float(np.percentile(v, RANGE_PERCENTILES[0])) for v in values)
+    hi = max(float(np.percentile(v, RANGE_PERCENTILES[1])) for v in values)
+    if centred_on_one(field):
         d = max(abs(hi - 1), abs(1 - lo), 1e-6)
         return 1 - d, 1 + d
     return lo, hi if hi > lo else lo + 1e-12
+
+
+def range_note(field: str, from_zero: bool = False) -> str:
+    """How :func:`_limits` chose the colour range of ``field``, for a legend; ``from_zero``:
+    the range of a field not centred on 1 starts at 0 instead (3D views)."""
+    lo, hi = RANGE_PERCENTILES
+    if centred_on_one(field):
+        return f"centred on 1, {lo:g}-{hi:g}th percentiles"
+    if from_zero:
+        return f"0 to the {hi:g}th percentile"
+    return f"{lo:g}-{hi:g}th percentiles"
+
+
+def centred_on_one(field: str) -> bool:
+    """Whether ``field`` is a stretch or volume ratio (:data:`CENTRED_ON_ONE`, any
+    ``lambda*``), drawn on a diverging scale centred on 1."""
+    return field in CENTRED_ON_ONE or field.startswith("lambda")
 
 
 def _draw(ax, vf: VertexFields, field: str, vmin: float, vmax: float, mask=None):
@@ -139,7 +165,8 @@ def plot_grid(
                 ax.text(-1.25, 0.5, f"{row_label} = {rv:g}", fontsize=8, rotation=90, va="center")
     if im is not None:
         fig.colorbar(im, ax=axes, shrink=0.6, label=LABELS.get(field, field))
-    fig.suptitle(title or LABELS.get(field, field), fontsize=10)
+    fig.suptitle(f"{title or LABELS.get(field, field)}\n(colour range shared: "
+                 f"{range_note(field)})", fontsize=10)
     return _save(fig, path)
 
 
@@ -172,7 +199,9 @@ def plot_rows(
                 ax.set_title(label, fontsize=8)
         if im is not None:
             fig.colorbar(im, ax=row, shrink=0.7, label=LABELS.get(field, field))
-    fig.suptitle(title or ", ".join(LABELS.get(f, f) for f in fields), fontsize=10)
+    notes = "; ".join(range_note(f) for f in dict.fromkeys(fields))
+    fig.suptitle(f"{title or ', '.join(LABELS.get(f, f) for f in fields)} (colour range "
+                 f"shared: {notes})", fontsize=10)
     return _save(fig, path)
 
 

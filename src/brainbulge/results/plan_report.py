@@ -7,7 +7,8 @@
 - ``centres.png``: the skull surface seen from the side of each hemisphere with candidates,
   each centre coloured by the least strained volume of its diameters.
 - ``report.md``: the recommendation (:func:`recommend`) against the 12 cm guideline and the
-  median clinical flap area.
+  median clinical flap area; ``report.html`` the same with the head in 3D, every candidate
+  flap drawn where it lies, coloured by a damage measure of choice (:func:`plan_scene`).
 
 **The recommendation rule.** Among the plans that converged, the least strained volume
 ``V_min`` sets a tolerance ``V_min + max(RECOMMEND_REL_TOL V_min, RECOMMEND_ABS_TOL_ML)``;
@@ -25,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from brainbulge.results.html_report import block_marker
 from brainbulge.results.run_record import atomic_output, atomic_write_text
 
 if TYPE_CHECKING:
@@ -234,7 +236,8 @@ def write_centre_map(path: Path, rows: list[dict[str, Any]], bm: BrainMesh,
 def write_plan_report(out_dir: Path, cases: list[CraniectomyCase],
                       results: list[dict[str, Any]], bm: BrainMesh,
                       threshold: float) -> list[Path]:
-    """``plan.csv``, ``pareto.png``, ``centres.png`` and ``report.md`` in ``out_dir``."""
+    """``plan.csv``, ``pareto.png``, ``centres.png``, ``report.md`` and ``report.html`` in
+    ``out_dir``."""
     out_dir = Path(out_dir)
     rows = plan_rows(cases, results)
     paths = [write_plan_table(out_dir / "plan.csv", rows),
@@ -242,7 +245,84 @@ def write_plan_report(out_dir: Path, cases: list[CraniectomyCase],
              write_centre_map(out_dir / "centres.png", rows, bm)]
     paths.append(atomic_write_text(out_dir / "report.md",
                                    report_text(rows, cases[0], threshold)))
+    from brainbulge.results.html_report import write_report_html
+    from brainbulge.results.webview import views_html
+
+    paths.append(write_report_html(out_dir / "report.md",
+                                   {"plan": views_html([plan_scene(out_dir, rows, bm)], "plan")}))
     return paths
+
+
+#: the flap outlines of the plan's 3D view: width and height above the head [mm]; the
+#: recommended flap's outline has a wider halo in RECOMMENDED_COLOUR below its own
+FLAP_LINE_MM = (1.6, 0.8)
+RECOMMENDED_LINE_MM = (4.5, 0.4)
+RECOMMENDED_COLOUR = (0.0, 0.75, 0.3)
+#: the colour scale of the damage measures (as in ``centres.png``)
+MEASURE_CMAP = "magma_r"
+
+
+def plan_scene(out_dir: Path, rows: list[dict[str, Any]], bm: BrainMesh) -> dict[str, Any]:
+    """The plan's 3D view: the head (outer surface of ``bm``) with the outline of every
+    candidate flap that ran (its folder's ``surface.npz``) coloured by the chosen damage
+    measure (:data:`MEASURES`; grey: not converged), the recommended one in green, and a
+    cross at the centre of each candidate that did not run (refused)."""
+    from brainbulge.results.views3d import Surface
+    from brainbulge.results.webview import (
+        colour_maps,
+        field_info,
+        frame,
+        line_layer,
+        mesh_layer,
+        presets,
+        ribbons,
+    )
+
+    X, faces = np.asarray(bm.nodes_mm, float), np.asarray(bm.faces)
+    centre = np.asarray(bm.envelope.centre_mm(), float)
+    best = recommend(rows)[0]
+    layers = [mesh_layer(X, None, faces, name="head", color=(0.86, 0.84, 0.8))]
+    pts, tris, vals, crosses = [], [], {k: [] for k in MEASURES}, []
+    for r in rows:
+        npz = Path(out_dir) / str(r["name"]) / "surface.npz"
+        if not npz.is_file():
+            c = np.array([r["centre_x_mm"], r["centre_y_mm"], r["centre_z_mm"]], float)
+            crosses.append(c + 4.0 * np.array([[[-1, 0, 0], [1, 0, 0]], [[0, -1, 0], [0, 1, 0]],
+                                               [[0, 0, -1], [0, 0, 1]]]))
+            continue
+        rim = Surface.load(npz).rim
+        if best is not None and r["name"] == best["name"]:
+            p, t = ribbons(X, rim, centre, *RECOMMENDED_LINE_MM)
+            layers.append(mesh_layer(p, None, t, name=f"recommended {r['name']}",
+                                     color=RECOMMENDED_COLOUR))
+        p, t = ribbons(X, rim, centre, *FLAP_LINE_MM)
+        tris.append(t + sum(len(q) for q in pts))
+        pts.append(p)
+        for k in MEASURES:
+            v = r.get(k)
+            vals[k].append(np.full(len(p), v if r.get("converged") and _finite(v) else -1e30))
+    if pts:
+        layers.append(mesh_layer(np.concatenate(pts), None, np.concatenate(tris), name="flaps",
+                                 values={k: np.concatenate(v) for k, v in vals.items()}))
+    if crosses:
+        c = np.concatenate(crosses).reshape(-1, 3)
+        layers.append(line_layer(c, None, np.arange(len(c)).reshape(-1, 2),
+                                 name="refused", color=(0.1, 0.1, 0.1)))
+    ranges = {}
+    for k in MEASURES:
+        ok = [r[k] for r in _ok(rows, k)]
+        ranges[k] = (min(ok), max(ok)) if ok else (0.0, 1.0)
+    direction = (None if best is None else np.array(
+        [best["centre_x_mm"], best["centre_y_mm"], best["centre_z_mm"]]) - centre)
+    caption = ("Each candidate flap's outline, coloured by the chosen damage measure (grey: "
+               "did not converge; crosses: refused centres). "
+               + (f"Green: the recommended {best['name']}." if best else "No recommendation."))
+    return {"title": "candidate flaps on the head",
+            "fields": field_info(ranges, {k: f"{lab} [{u}]" for k, (lab, u) in MEASURES.items()},
+                                 dict.fromkeys(MEASURES, "least to most over the converged "
+                                               "plans"), dict.fromkeys(MEASURES, MEASURE_CMAP)),
+            "cmaps": colour_maps([MEASURE_CMAP]), "layers": layers, "caption": caption,
+            "views": presets(direction), **frame(X[np.unique(faces)])}
 
 
 def report_text(rows: list[dict[str, Any]], base: CraniectomyCase, threshold: float) -> str:
@@ -289,7 +369,8 @@ def report_text(rows: list[dict[str, Any]], base: CraniectomyCase, threshold: fl
             f"{best['flap_area_cm2'] / MEDIAN_CLINICAL_AREA_CM2:.0%} of it.",
             "",
         ]
-    lines += ["![pareto](pareto.png)", "", "![centres](centres.png)", "", "## Plans", "",
+    lines += [block_marker("plan"), "", "![pareto](pareto.png)", "", "![centres](centres.png)",
+              "", "## Plans", "",
               "| plan | diameter mm | area cm2 | strained ml | p99 strain | rim peak strain "
               "| max abs u mm | midline shift mm | note |", "|---" * 9 + "|"]
 

@@ -1,4 +1,5 @@
-"""The demo's ``report.md``: what was run, the figures and the tables of its three studies.
+"""The demo's ``report.md`` and ``report.html``: what was run, the figures and the tables of
+its three studies (the HTML page with the interactive 3D views of the craniectomy scenarios).
 
 Each scenario's numbers are read back from its ``summary.json``; a scenario without one is
 reported as failed.
@@ -10,6 +11,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from brainbulge.results.html_report import views_marker, write_report_html
 from brainbulge.results.run_record import atomic_write_text
 
 #: the hemidisk columns of the demo's tables
@@ -45,7 +47,7 @@ def _table(rows: list[tuple[str, dict[str, Any] | None]], keys=REPORT_KEYS) -> l
 def write_demo_report(
     out: Path, headline: list[dict], sweep: list[dict], brain: list[dict] | None = None
 ) -> Path:
-    """``report.md``: what was run, the figures, the tables."""
+    """``report.md`` (what was run, the figures, the tables) and ``report.html``."""
     lines = [
         "# brainbulge demo report",
         "",
@@ -78,6 +80,8 @@ def write_demo_report(
             "",
             "![comparison](brain/comparison.png)",
             "",
+            views_marker("brain"),
+            "",
         ]
         keys = ("midline_shift_mm", "bulge_volume_ml", "max_displacement",
                 "max_principal_strain", "max_radial_stretch", "max_tangential_stretch",
@@ -98,4 +102,5 @@ def write_demo_report(
     ]
     path = out / "report.md"
     atomic_write_text(path, "\n".join(lines) + "\n")
+    write_report_html(path)
     return path

@@ -204,6 +204,16 @@ def plot_sections(
     return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 
+def section_centre_mm(bm, flap: str | None) -> np.ndarray:
+    """Where a scenario's sections cross (mm): the flap centre of the brain mesh ``bm``
+    pulled half way towards the brain centre (inside the tissue), or the brain centre
+    without a flap."""
+    centre = np.asarray(bm.envelope.centre_mm(), dtype=float)
+    if flap not in bm.flaps:
+        return centre
+    return 0.5 * (np.asarray(bm.flaps[flap].centre_mm, dtype=float) + centre)
+
+
 def _field_key(name: str) -> str:
     """The key of ``results.figures.LABELS``/``CMAPS`` for a display name like ``"|u|"``."""
     aliases = {"|u|": "u_magnitude", "max principal strain": "max_principal_strain"}

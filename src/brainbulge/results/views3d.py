@@ -10,13 +10,19 @@ vertices' values, darkened by a Lambert factor ``0.55 + 0.45 |n . d|`` so that t
 reads. The flap's rim (edges between flap and skull faces) is drawn in black.
 
 Two views: ``"above"`` (looking down the -z axis, the patient's right on the right, anterior
-up) and ``"flap"`` (looking at the flap's centre from outside, superior up). Colour ranges are
-fixed per field (:data:`SURFACE_RANGES`), or shared across scenarios by
-:func:`plot_study_surfaces`, so that pictures compare.
+up) and ``"flap"`` (looking at the flap's centre from outside, superior up). Colour ranges come
+from the data (:func:`shared_ranges`: percentiles of the surface's vertices; stretches and
+``Je`` centred on 1), shared across scenarios by :func:`plot_study_surfaces`, so that pictures
+compare; the colour bars say so.
+
+``surface.npz`` also keeps ``Je`` and the transverse and sagittal :class:`Cut` of the
+parenchyma through the sections' centre, for the interactive ``view.html``
+(:mod:`brainbulge.results.webview`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +36,19 @@ from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
 from brainbulge.atomic import atomic_output
-from brainbulge.results.figures import CMAPS, LABELS, _save  # noqa: E402
+from brainbulge.results.figures import (  # noqa: E402
+    CMAPS,
+    LABELS,
+    _limits,
+    _save,
+    centred_on_one,
+    range_note,
+)
+from brainbulge.results.sections import (  # noqa: E402
+    PLANES,
+    section_centre_mm,
+    section_triangles,
+)
 
 #: the four fields of the paper's Figure 9: (point-data key, title)
 SURFACE_FIELDS: dict[str, str] = {
@@ -39,17 +57,26 @@ SURFACE_FIELDS: dict[str, str] = {
     "lambda_n": r"radial stretch $\lambda_n$",
     "lambda_t": r"tangential stretch $\lambda_t$",
 }
-#: fixed colour ranges of a single scenario's views (as the sections')
-SURFACE_RANGES: dict[str, tuple[float, float]] = {
-    "u_magnitude": (0.0, 8.0),
-    "max_principal_strain": (0.0, 0.3),
-    "lambda_n": (0.8, 1.2),
-    "lambda_t": (0.8, 1.2),
-}
+#: the fields kept in ``surface.npz`` and shown by ``view.html``: the four above and Je
+VIEW_FIELDS: dict[str, str] = {**SURFACE_FIELDS, "Je": "elastic volume ratio Je = J/Js"}
+#: the sections kept for ``view.html`` (as in ``sections.png``)
+CUT_PLANES = ("transverse", "sagittal")
 VIEWS = ("above", "flap")
 #: parenchyma faces within this distance of the skull surface's flap count as the flap's
 FLAP_DEPTH_MM = 8.0
 RIM = {"color": "black", "lw": 1.2}
+
+
+@dataclass
+class Cut:
+    """A planar section of the parenchyma (:func:`~brainbulge.results.sections.
+    section_triangles`): reference ``points`` (p, 3) mm, ``triangles`` (t, 3), displacement
+    ``u`` (p, 3) mm and nodal ``fields`` there."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    u: np.ndarray
+    fields: dict[str, np.ndarray]
 
 
 @dataclass
@@ -58,7 +85,8 @@ class Surface:
     displacement ``u`` (n, 3) mm, nodal ``fields`` (name -> (n,)), the faces under the flap
     ``flap_faces`` (bool (f,)), ``flap_direction`` (unit vector from the brain's centre to the
     flap) and the flap's ``rim`` (e, 2): edges between points, drawn as a line (default: the
-    boundary of ``flap_faces``)."""
+    boundary of ``flap_faces``); ``cuts``: sections of the parenchyma by plane name
+    (:data:`CUT_PLANES`), with the ``cut_centre`` (mm) they pass through."""
 
     points: np.ndarray
     faces: np.ndarray
@@ -67,26 +95,49 @@ class Surface:
     flap_faces: np.ndarray
     flap_direction: np.ndarray
     rim: np.ndarray | None = None
+    cuts: dict[str, Cut] = dataclasses.field(default_factory=dict)
+    cut_centre: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.rim is None:
             self.rim = _rim_edges(np.asarray(self.faces), np.asarray(self.flap_faces, bool))
 
     def save(self, path: Path) -> Path:
-        """``surface.npz`` of a scenario: what :func:`plot_study_surfaces` reads."""
+        """``surface.npz`` of a scenario: what :func:`plot_study_surfaces` and ``view.html``
+        read."""
+        cuts = {}
+        for plane, c in self.cuts.items():
+            cuts |= {f"cut_{plane}_points": c.points, f"cut_{plane}_triangles": c.triangles,
+                     f"cut_{plane}_u": c.u,
+                     **{f"cut_{plane}_field_{k}": v for k, v in c.fields.items()}}
+        if self.cut_centre is not None:
+            cuts["cut_centre"] = self.cut_centre
         with atomic_output(Path(path)) as tmp:
             np.savez_compressed(tmp, points=self.points, faces=self.faces, u=self.u,
                                 flap_faces=self.flap_faces,
                                 flap_direction=self.flap_direction, rim=self.rim,
-                                **{f"field_{k}": v for k, v in self.fields.items()})
+                                **{f"field_{k}": v for k, v in self.fields.items()}, **cuts)
         return Path(path)
 
     @classmethod
     def load(cls, path: Path) -> Surface:
         d = np.load(path)
         fields = {k[len("field_"):]: d[k] for k in d.files if k.startswith("field_")}
+        cuts = {}
+        for plane in CUT_PLANES:
+            pre = f"cut_{plane}_"
+            if pre + "points" in d.files:
+                cuts[plane] = Cut(d[pre + "points"], d[pre + "triangles"], d[pre + "u"],
+                                  {k[len(pre + "field_"):]: d[k] for k in d.files
+                                   if k.startswith(pre + "field_")})
         return cls(d["points"], d["faces"], d["u"], fields, d["flap_faces"],
-                   d["flap_direction"], d["rim"] if "rim" in d.files else None)
+                   d["flap_direction"], d["rim"] if "rim" in d.files else None, cuts,
+                   d["cut_centre"] if "cut_centre" in d.files else None)
+
+    def surface_values(self, name: str) -> np.ndarray:
+        """Field ``name`` at the vertices of the faces (the points off the surface carry
+        no value of it)."""
+        return np.asarray(self.fields[name], dtype=float)[np.unique(self.faces)]
 
 
 def view_frame(view: str, flap_direction: np.ndarray) -> np.ndarray:
@@ -151,8 +202,9 @@ def _cmap(field: str) -> str:
 def plot_surface_views(s: Surface, path: str | Path, title: str = "",
                        ranges: dict[str, tuple[float, float]] | None = None,
                        dpi: int = 100) -> Path:
-    """One scenario: the four fields (columns) seen from above and from the flap (rows)."""
-    ranges = {**SURFACE_RANGES, **(ranges or {})}
+    """One scenario: the four fields (columns) seen from above and from the flap (rows);
+    colour ranges from its data (:func:`shared_ranges`) unless given."""
+    ranges = {**shared_ranges([s]), **(ranges or {})}
     fig, axes = plt.subplots(len(VIEWS), len(SURFACE_FIELDS), squeeze=False,
                              figsize=(3.3 * len(SURFACE_FIELDS), 3.2 * len(VIEWS)),
                              layout="constrained")
@@ -167,24 +219,29 @@ def plot_surface_views(s: Surface, path: str | Path, title: str = "",
         fig.colorbar(m, ax=[axes[r][col] for r in range(len(VIEWS))], orientation="horizontal",
                      shrink=0.8, label=LABELS.get(field, label) if field != "u_magnitude"
                      else label)
-    if title:
-        fig.suptitle(title, fontsize=11)
+    fig.suptitle((f"{title}\n" if title else "") + ranges_note(), fontsize=10)
     return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 
+def ranges_note() -> str:
+    """How :func:`shared_ranges` chooses the colour ranges, for a figure's title."""
+    return (f"colour ranges: |u| and strain {range_note('u_magnitude', from_zero=True)}, "
+            f"stretches {range_note('lambda_n')}")
+
+
 def shared_ranges(surfaces: Sequence[Surface]) -> dict[str, tuple[float, float]]:
-    """Per field, one colour range over all ``surfaces``: 0 to the largest 99.5th percentile
-    for |u| and strain, symmetric about 1 for the stretches."""
+    """Per field (of :data:`VIEW_FIELDS` that all ``surfaces`` have), one colour range over
+    the values at their surface vertices (:meth:`Surface.surface_values`; the points off the
+    surface hold no value): 0 to the largest upper percentile
+    (:data:`~brainbulge.results.figures.RANGE_PERCENTILES`) for |u| and strain, from the
+    percentiles and symmetric about 1 for stretches and Je
+    (:func:`~brainbulge.results.figures.range_note`)."""
     out: dict[str, tuple[float, float]] = {}
-    for field in SURFACE_FIELDS:
-        vals = [np.asarray(s.fields[field], dtype=float) for s in surfaces]
-        hi = max(float(np.percentile(v, 99.5)) for v in vals)
-        lo = min(float(np.percentile(v, 0.5)) for v in vals)
-        if field.startswith("lambda"):
-            d = max(abs(hi - 1.0), abs(1.0 - lo), 1e-3)
-            out[field] = (1.0 - d, 1.0 + d)
-        else:
-            out[field] = (0.0, max(hi, 1e-6))
+    for name in VIEW_FIELDS:
+        if not all(name in s.fields for s in surfaces):
+            continue
+        lo, hi = _limits(name, [s.surface_values(name) for s in surfaces])
+        out[name] = (lo, hi) if centred_on_one(name) else (0.0, max(hi, 1e-6))
     return out
 
 
@@ -207,7 +264,7 @@ def plot_study_surfaces(surfaces: dict[str, Surface], path: str | Path, view: st
         fig.colorbar(m, ax=[axes[r][col] for r in range(n)], orientation="horizontal",
                      shrink=0.8, aspect=30, label=label)
     fig.suptitle(f"deformed surface seen {'from above' if view == 'above' else 'from the flap'}"
-                 " (colour ranges shared by the scenarios)", fontsize=10)
+                 f"\n{ranges_note()}, shared by the scenarios", fontsize=10)
     return _save(fig, path, dpi=dpi, bbox_inches=None)
 
 
@@ -246,9 +303,10 @@ def write_surface_views(vf, bm, flap: str, out_dir: Path, title: str = "") -> Pa
     fields = {}
     vid = np.asarray(vf.cells)[brain].ravel()
     count = np.maximum(np.bincount(vid, minlength=len(vf.points)), 1)
-    for k in SURFACE_FIELDS:
-        cell = np.repeat(np.asarray(vf.cell_data[k], dtype=float)[brain], 4)
-        fields[k] = np.bincount(vid, weights=cell, minlength=len(vf.points)) / count
+    for k in VIEW_FIELDS:
+        if k in vf.cell_data:
+            cell = np.repeat(np.asarray(vf.cell_data[k], dtype=float)[brain], 4)
+            fields[k] = np.bincount(vid, weights=cell, minlength=len(vf.points)) / count
     if flap in bm.flaps:
         # the parenchyma faces under the flap: nearest to a flap face of the outer surface,
         # within FLAP_DEPTH_MM of it (not the walls of a ventricle below the flap)
@@ -264,11 +322,31 @@ def write_surface_views(vf, bm, flap: str, out_dir: Path, title: str = "") -> Pa
         mask = np.zeros(len(faces), dtype=bool)
         rim = np.zeros((0, 2), dtype=int)
         direction = np.array([-1.0, 0.0, 0.0])
-    s = Surface(np.asarray(vf.points, dtype=float), faces,
-                np.asarray(vf.point_data["u"], dtype=float), fields, mask,
-                direction / np.linalg.norm(direction), rim)
+    u = np.asarray(vf.point_data["u"], dtype=float)
+    cut_centre = section_centre_mm(bm, flap)
+    s = Surface(np.asarray(vf.points, dtype=float), faces, u, fields, mask,
+                direction / np.linalg.norm(direction), rim,
+                cuts_of(vf.points, np.asarray(vf.cells)[brain], u, fields, cut_centre),
+                cut_centre)
     s.save(Path(out_dir) / "surface.npz")
+    from brainbulge.results.webview import write_view_html
+
+    write_view_html(s, Path(out_dir) / "view.html", title=title)
     return plot_surface_views(s, Path(out_dir) / "surface.png", title=title)
+
+
+def cuts_of(points: np.ndarray, tets: np.ndarray, u: np.ndarray,
+            fields: dict[str, np.ndarray], centre: np.ndarray) -> dict[str, Cut]:
+    """The :data:`CUT_PLANES` sections of the tets ``tets`` through ``centre`` (mm), with
+    ``u`` and the nodal ``fields`` interpolated on them."""
+    names = list(fields)
+    stacked = np.column_stack([u] + [fields[k] for k in names])
+    cuts = {}
+    for plane in CUT_PLANES:
+        sec = section_triangles(points, tets, stacked, centre, np.eye(3)[PLANES[plane][0]])
+        cuts[plane] = Cut(sec.points, sec.triangles, sec.values[:, :3],
+                          {k: sec.values[:, 3 + i] for i, k in enumerate(names)})
+    return cuts
 
 
 def write_study_surfaces(out_dir: Path, names: Sequence[str]) -> list[Path]:

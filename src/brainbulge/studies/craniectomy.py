@@ -68,7 +68,7 @@ from brainbulge.results.export import (
 from brainbulge.results.extreme_sites import brain_extreme_sites
 from brainbulge.results.recovery import recovered_gradient
 from brainbulge.results.run_record import atomic_write_json, atomic_write_text
-from brainbulge.results.sections import plot_sections
+from brainbulge.results.sections import plot_sections, section_centre_mm
 from brainbulge.results.summary import PointFields, point_fields, solution_summary
 from brainbulge.results.views3d import write_surface_views
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
@@ -351,11 +351,9 @@ def section_figure(
         "lambda_n": pd["lambda_n"],
         "lambda_t": pd["lambda_t"],
     }
-    centre = np.asarray(bm.flaps[case.flap].centre_mm, dtype=float)
-    # cut through the flap centre pulled half way towards the brain centre (inside tissue)
-    centre = 0.5 * (centre + bm.envelope.centre_mm())
     return plot_sections(
-        vf.points, vf.cells, pd["u"], fields, centre, path, ranges=SECTION_RANGES, title=title
+        vf.points, vf.cells, pd["u"], fields, section_centre_mm(bm, case.flap), path,
+        ranges=SECTION_RANGES, title=title
     )
 
 
