@@ -236,3 +236,123 @@ def _inner_points(mesh: ngs.Mesh, rx: re.Pattern) -> np.ndarray:
             key = tuple(sorted(v.nr for v in el.vertices))
             out.append(X[els[owner[key]]].mean(axis=0))
     return np.array(out)
+
+
+def _right_normal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    t = b - a
+    return np.array([t[1], -t[0]]) / float(np.hypot(t[0], t[1]))
+
+
+def smooth_gap(C: np.ndarray, z: np.ndarray) -> float | None:
+    """Gap of ``C`` along the boundary's interpolated normal on the segment ``a -> b``,
+    ``z = (p, a, b, q)`` (8,) with ``p``, ``q`` the neighbouring vertices: vertex normals
+    ``N_a``, ``N_b`` averaged from the adjacent segments, ``n(xi) = (1 - xi) N_a + xi N_b``,
+    and ``xi`` where ``C - x(xi)`` is parallel to ``n(xi)``. None when no ``xi`` in [0, 1]."""
+    p, a, b, q = z[:2], z[2:4], z[4:6], z[6:]
+    n_ab = _right_normal(a, b)
+    Na = n_ab if np.array_equal(p, a) else _right_normal(p, a) + n_ab
+    Nb = n_ab if np.array_equal(q, b) else n_ab + _right_normal(b, q)
+    Na, Nb = Na / np.linalg.norm(Na), Nb / np.linalg.norm(Nb)
+
+    def f(xi: float) -> float:
+        w = C - (a + xi * (b - a))
+        n = (1 - xi) * Na + xi * Nb
+        return float(w[0] * n[1] - w[1] * n[0])
+
+    lo, hi = 0.0, 1.0
+    f_lo, f_hi = f(lo), f(hi)
+    if f_lo * f_hi > 0:
+        return None
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = f(mid)
+        if f_lo * f_mid <= 0:
+            hi = mid
+        else:
+            lo, f_lo = mid, f_mid
+    xi = 0.5 * (lo + hi)
+    n = (1 - xi) * Na + xi * Nb
+    return float(np.dot(C - (a + xi * (b - a)), n / np.linalg.norm(n)))
+
+
+class SmoothEdgeContact(EdgeContact):
+    """:class:`EdgeContact` against a C1 boundary (:func:`smooth_gap`): the gap and its
+    normal do not jump when the edge point passes a vertex of the tissue's boundary."""
+
+    def __init__(self, form, boundary: str, points: np.ndarray) -> None:
+        super().__init__(form, boundary, points)
+        self.next_of = {int(a): int(b) for a, b in self.segments}
+        self.prev_of = {int(b): int(a) for a, b in self.segments}
+
+    def _quad(self, s: int) -> np.ndarray:
+        a, b = (int(v) for v in self.segments[s])
+        return np.array([self.prev_of.get(a, a), a, b, self.next_of.get(b, b)])
+
+    def update(self, x: np.ndarray) -> None:
+        super().update(x)  # positions, and the plain gap as the fallback
+        if not hasattr(self, "next_of"):
+            return
+        mids = 0.5 * (self.pos[self.segments[:, 0]] + self.pos[self.segments[:, 1]])
+        for k, C in enumerate(self.C):
+            near = np.argsort(np.linalg.norm(mids - C, axis=1))[:8]
+            best = None
+            for s in near:
+                g = smooth_gap(C, self.pos[self._quad(int(s))].ravel())
+                if g is not None and (best is None or abs(g) < abs(best[0])):
+                    best = (g, int(s))
+            if best is not None:
+                self.g[k], self.seg[k] = best
+
+    def _grad_at(self, k: int, z: np.ndarray) -> np.ndarray:
+        delta = 1e-7 * float(np.linalg.norm(z[4:6] - z[2:4]))
+        grad = np.zeros(8)
+        for j in range(8):
+            e = np.zeros(8)
+            e[j] = delta
+            gp, gm = smooth_gap(self.C[k], z + e), smooth_gap(self.C[k], z - e)
+            if gp is None or gm is None:
+                return np.zeros(8)
+            grad[j] = (gp - gm) / (2 * delta)
+        return grad
+
+    def _local(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        quad = self._quad(int(self.seg[k]))
+        grad = self._grad_at(k, self.pos[quad].ravel())
+        return grad, self.vertex_dofs[quad].ravel()
+
+    def _hessian(self, k: int) -> np.ndarray:
+        quad = self._quad(int(self.seg[k]))
+        z = self.pos[quad].ravel()
+        delta = 1e-4 * float(np.linalg.norm(z[4:6] - z[2:4]))
+        H = np.empty((8, 8))
+        for j in range(8):
+            e = np.zeros(8)
+            e[j] = delta
+            H[:, j] = (self._grad_at(k, z + e) - self._grad_at(k, z - e)) / (2 * delta)
+        return 0.5 * (H + H.T)
+
+    def add_forces(self, R: np.ndarray, lam: np.ndarray | None = None) -> None:
+        lam = self.lam if lam is None else lam
+        for k in np.flatnonzero(lam != 0):
+            grad, dofs = self._local(int(k))
+            np.add.at(R, dofs, -self.weights[k] * lam[k] * grad)
+
+    def B(self, rows: np.ndarray) -> sp.csr_matrix:
+        r, c, v = [], [], []
+        for m, k in enumerate(rows):
+            grad, dofs = self._local(int(k))
+            r += [m] * len(dofs)
+            c += list(dofs)
+            v += list(self.weights[k] * grad)
+        return sp.csr_matrix((v, (r, c)), shape=(len(rows), self.ndof))
+
+    def curvature(self) -> sp.csr_matrix:
+        r, c, v = [], [], []
+        for k in np.flatnonzero(self.lam != 0):
+            _, dofs = self._local(int(k))
+            block = self.weights[k] * self.lam[k] * self._hessian(int(k))
+            n = len(dofs)
+            r += list(np.repeat(dofs, n))
+            c += list(np.tile(dofs, n))
+            v += list(block.ravel())
+        return sp.csr_matrix((v, (r, c)), shape=(self.ndof, self.ndof))
