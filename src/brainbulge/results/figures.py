@@ -165,8 +165,10 @@ def plot_grid(
                 ax.text(-1.25, 0.5, f"{row_label} = {rv:g}", fontsize=8, rotation=90, va="center")
     if im is not None:
         fig.colorbar(im, ax=axes, shrink=0.6, label=LABELS.get(field, field))
+    # above the figure (the tight bounding box takes it in): inside it, the two lines
+    # overlapped the column titles of a one-row grid
     fig.suptitle(f"{title or LABELS.get(field, field)}\n(colour range shared: "
-                 f"{range_note(field)})", fontsize=10)
+                 f"{range_note(field)})", fontsize=10, y=1.0, va="bottom")
     return _save(fig, path)
 
 
