@@ -243,36 +243,114 @@ def _right_normal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([t[1], -t[0]]) / float(np.hypot(t[0], t[1]))
 
 
+class _Dual:
+    """A value with its gradient (forward-mode differentiation of :func:`smooth_gap`)."""
+
+    __slots__ = ("v", "d")
+
+    def __init__(self, v: float, d: np.ndarray) -> None:
+        self.v, self.d = v, d
+
+    def _lift(self, o):
+        return o if isinstance(o, _Dual) else _Dual(float(o), np.zeros_like(self.d))
+
+    def __add__(self, o):
+        o = self._lift(o)
+        return _Dual(self.v + o.v, self.d + o.d)
+
+    __radd__ = __add__
+
+    def __sub__(self, o):
+        o = self._lift(o)
+        return _Dual(self.v - o.v, self.d - o.d)
+
+    def __rsub__(self, o):
+        return self._lift(o) - self
+
+    def __mul__(self, o):
+        o = self._lift(o)
+        return _Dual(self.v * o.v, self.d * o.v + o.d * self.v)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        o = self._lift(o)
+        return _Dual(self.v / o.v, (self.d * o.v - o.d * self.v) / o.v**2)
+
+
+def _sqrt(x):
+    if isinstance(x, _Dual):
+        r = float(np.sqrt(x.v))
+        return _Dual(r, x.d / (2 * r))
+    return float(np.sqrt(x))
+
+
+def _normalized(v):
+    n = _sqrt(v[0] * v[0] + v[1] * v[1])
+    return [v[0] / n, v[1] / n]
+
+
+def _gap_terms(C, z, xi):
+    """``f = (C - x(xi)) x n(xi)`` (zero at the projection) and ``g = (C - x) . n / |n|``
+    for positions ``z`` (8 values or duals) and ``xi``."""
+    p, a, b, q = z[0:2], z[2:4], z[4:6], z[6:8]
+
+    def rn(u, w):  # right unit normal of u -> w
+        return _normalized([w[1] - u[1], u[0] - w[0]])
+
+    n_ab = rn(a, b)
+    end_a = float(_val(p[0])) == float(_val(a[0])) and float(_val(p[1])) == float(_val(a[1]))
+    end_b = float(_val(q[0])) == float(_val(b[0])) and float(_val(q[1])) == float(_val(b[1]))
+    Na = n_ab if end_a else _normalized([m + k for m, k in zip(rn(p, a), n_ab, strict=True)])
+    Nb = n_ab if end_b else _normalized([m + k for m, k in zip(n_ab, rn(b, q), strict=True)])
+    x = [a[i] + xi * (b[i] - a[i]) for i in range(2)]
+    w = [C[i] - x[i] for i in range(2)]
+    n = [(1 - xi) * Na[i] + xi * Nb[i] for i in range(2)]
+    f = w[0] * n[1] - w[1] * n[0]
+    g = (w[0] * n[0] + w[1] * n[1]) / _sqrt(n[0] * n[0] + n[1] * n[1])
+    return f, g
+
+
+def _val(x) -> float:
+    return x.v if isinstance(x, _Dual) else x
+
+
+def _projection(C: np.ndarray, z: np.ndarray) -> float | None:
+    """``xi`` in [0, 1] where ``C - x(xi)`` is parallel to the interpolated normal (bisection),
+    None when there is none."""
+    lo, hi = 0.0, 1.0
+    f_lo, f_hi = _gap_terms(C, z, lo)[0], _gap_terms(C, z, hi)[0]
+    if f_lo * f_hi > 0:
+        return None
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = _gap_terms(C, z, mid)[0]
+        if f_lo * f_mid <= 0:
+            hi = mid
+        else:
+            lo, f_lo = mid, f_mid
+    return 0.5 * (lo + hi)
+
+
 def smooth_gap(C: np.ndarray, z: np.ndarray) -> float | None:
     """Gap of ``C`` along the boundary's interpolated normal on the segment ``a -> b``,
     ``z = (p, a, b, q)`` (8,) with ``p``, ``q`` the neighbouring vertices: vertex normals
     ``N_a``, ``N_b`` averaged from the adjacent segments, ``n(xi) = (1 - xi) N_a + xi N_b``,
     and ``xi`` where ``C - x(xi)`` is parallel to ``n(xi)``. None when no ``xi`` in [0, 1]."""
-    p, a, b, q = z[:2], z[2:4], z[4:6], z[6:]
-    n_ab = _right_normal(a, b)
-    Na = n_ab if np.array_equal(p, a) else _right_normal(p, a) + n_ab
-    Nb = n_ab if np.array_equal(q, b) else n_ab + _right_normal(b, q)
-    Na, Nb = Na / np.linalg.norm(Na), Nb / np.linalg.norm(Nb)
+    xi = _projection(C, z)
+    return None if xi is None else float(_gap_terms(C, z, xi)[1])
 
-    def f(xi: float) -> float:
-        w = C - (a + xi * (b - a))
-        n = (1 - xi) * Na + xi * Nb
-        return float(w[0] * n[1] - w[1] * n[0])
 
-    lo, hi = 0.0, 1.0
-    f_lo, f_hi = f(lo), f(hi)
-    if f_lo * f_hi > 0:
+def smooth_gap_gradient(C: np.ndarray, z: np.ndarray) -> np.ndarray | None:
+    """Exact ``d g / d z`` (8,) of :func:`smooth_gap` (implicit in ``xi``: ``dg/dz = g_z -
+    g_xi f_z / f_xi``), or None when ``C`` does not project onto the segment."""
+    xi = _projection(C, z)
+    if xi is None:
         return None
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        f_mid = f(mid)
-        if f_lo * f_mid <= 0:
-            hi = mid
-        else:
-            lo, f_lo = mid, f_mid
-    xi = 0.5 * (lo + hi)
-    n = (1 - xi) * Na + xi * Nb
-    return float(np.dot(C - (a + xi * (b - a)), n / np.linalg.norm(n)))
+    eye = np.eye(9)
+    zd = [_Dual(float(z[i]), eye[i]) for i in range(8)]
+    f, g = _gap_terms(C, zd, _Dual(xi, eye[8]))
+    return g.d[:8] - g.d[8] * f.d[:8] / f.d[8]
 
 
 class SmoothEdgeContact(EdgeContact):
@@ -304,16 +382,8 @@ class SmoothEdgeContact(EdgeContact):
                 self.g[k], self.seg[k] = best
 
     def _grad_at(self, k: int, z: np.ndarray) -> np.ndarray:
-        delta = 1e-7 * float(np.linalg.norm(z[4:6] - z[2:4]))
-        grad = np.zeros(8)
-        for j in range(8):
-            e = np.zeros(8)
-            e[j] = delta
-            gp, gm = smooth_gap(self.C[k], z + e), smooth_gap(self.C[k], z - e)
-            if gp is None or gm is None:
-                return np.zeros(8)
-            grad[j] = (gp - gm) / (2 * delta)
-        return grad
+        grad = smooth_gap_gradient(self.C[k], z)
+        return np.zeros(8) if grad is None else grad
 
     def _local(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         quad = self._quad(int(self.seg[k]))
@@ -323,7 +393,7 @@ class SmoothEdgeContact(EdgeContact):
     def _hessian(self, k: int) -> np.ndarray:
         quad = self._quad(int(self.seg[k]))
         z = self.pos[quad].ravel()
-        delta = 1e-4 * float(np.linalg.norm(z[4:6] - z[2:4]))
+        delta = 1e-6 * float(np.linalg.norm(z[4:6] - z[2:4]))
         H = np.empty((8, 8))
         for j in range(8):
             e = np.zeros(8)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from bench_hard_cases import region_gap
-from edge_contact import segment_gap
+from edge_contact import segment_gap, smooth_gap, smooth_gap_gradient
 
 
 def test_region_gap_is_the_distance_to_the_skull_region_with_its_gradient():
@@ -47,3 +47,25 @@ def test_segment_gap_is_signed_and_its_gradient_exact():
         e[j] = eps
         fd = (segment_gap(C, *np.split(z + e, 2))[0] - segment_gap(C, *np.split(z - e, 2))[0])
         assert abs(fd / (2 * eps) - grad[j]) < 1e-6
+
+
+def test_smooth_gap_gradient_is_exact_and_the_gap_continuous_across_a_vertex():
+    """The interpolated-normal gap's exact gradient (implicit in the projection) matches
+    central differences, and the gap of a point over a boundary vertex is the same from the
+    two segments that share it (a C1 boundary)."""
+    C = np.array([0.45, 1.02])
+    z = np.array([0.2, 0.97, 0.4, 0.98, 0.6, 0.95, 0.8, 0.88])
+    grad = smooth_gap_gradient(C, z)
+    fd = np.array([(smooth_gap(C, z + e) - smooth_gap(C, z - e)) / 2e-6
+                   for e in np.eye(8) * 1e-6])
+    np.testing.assert_allclose(grad, fd, atol=1e-8)
+    # points swept over the vertex (0.6, 0.95) at 0.03 from it: each projects onto one of
+    # the two segments that share it, and the gap varies continuously from one to the other
+    v, second = np.array([0.6, 0.95]), np.concatenate([z[2:], [1.0, 0.75]])
+    gaps = []
+    for angle in np.linspace(-0.3, 0.3, 61):
+        point = v + 0.03 * np.array([np.sin(angle), np.cos(angle)])
+        found = [g for g in (smooth_gap(point, z), smooth_gap(point, second)) if g is not None]
+        assert found, angle
+        gaps.append(found[0])
+    assert np.max(np.abs(np.diff(gaps))) < 2e-4
