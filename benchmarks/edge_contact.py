@@ -243,6 +243,11 @@ def _right_normal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([t[1], -t[0]]) / float(np.hypot(t[0], t[1]))
 
 
+#: the force along the interpolated normal at the projection held fixed (its derivative
+#: leaves out d xi / d z: continuous across a vertex, where the exact one jumps)
+FROZEN_PROJECTION = False
+
+
 class _Dual:
     """A value with its gradient (forward-mode differentiation of :func:`smooth_gap`)."""
 
@@ -350,6 +355,8 @@ def smooth_gap_gradient(C: np.ndarray, z: np.ndarray) -> np.ndarray | None:
     eye = np.eye(9)
     zd = [_Dual(float(z[i]), eye[i]) for i in range(8)]
     f, g = _gap_terms(C, zd, _Dual(xi, eye[8]))
+    if FROZEN_PROJECTION:
+        return g.d[:8]
     return g.d[:8] - g.d[8] * f.d[:8] / f.d[8]
 
 
