@@ -51,7 +51,7 @@ CASES_2D = {
     "a80b60": (80.0, 60.0),
 }
 VARIANTS = ("production", "released", "released-per-solve", "released-opening", "edge",
-            "edge-smooth")
+            "edge-smooth", "edge-hermite")
 
 
 # --- the skull region S and its signed distance ---------------------------------------
@@ -175,9 +175,10 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dic
     form = MixedForm(problem, element=case.element)
     edges = variant.startswith("edge")
     if edges:
-        from edge_contact import EdgeContact, SmoothEdgeContact
+        from edge_contact import EdgeContact, HermiteEdgeContact, SmoothEdgeContact
 
-        kind = SmoothEdgeContact if variant == "edge-smooth" else EdgeContact
+        kind = {"edge-smooth": SmoothEdgeContact,
+                "edge-hermite": HermiteEdgeContact}.get(variant, EdgeContact)
         form.point_contacts.append(kind(form, "skull|opening", edge_points(*geo)))
     solver = NewtonSolver(form, SolverOptions(steps=case.steps))
     if edges:
