@@ -343,7 +343,9 @@ def _vertex_displacements(form: MixedForm, bm: BrainMesh) -> np.ndarray:
 def section_figure(
     vf: VertexFields, bm: BrainMesh, case: CraniectomyCase, path: Path, title: str = ""
 ) -> Path:
-    """Transverse and sagittal sections through the flap centre (fixed colour ranges)."""
+    """Transverse and sagittal sections through the flap centre, in colour ranges fixed
+    across runs (:data:`SECTION_RANGES`, stretches centred on 1) so that sections of
+    different runs compare; the figure's title states them."""
     pd = vf.point_data
     fields = {
         "|u|": pd["u_magnitude"],
@@ -351,9 +353,11 @@ def section_figure(
         "lambda_n": pd["lambda_n"],
         "lambda_t": pd["lambda_t"],
     }
+    fixed = ", ".join(f"{name} {lo:g}-{hi:g}" for name, (lo, hi) in SECTION_RANGES.items())
+    note = f"colour ranges fixed across runs: {fixed}"
     return plot_sections(
         vf.points, vf.cells, pd["u"], fields, section_centre_mm(bm, case.flap), path,
-        ranges=SECTION_RANGES, title=title
+        ranges=SECTION_RANGES, title=f"{title}\n({note})" if title else note
     )
 
 

@@ -107,7 +107,12 @@ def save_brain_mesh(mesh: BrainMesh, out_dir: str | Path, flap: str | None = Non
         log.warning("h5py is not installed: brain.xdmf not written (pip install h5py)")
         paths.pop("xdmf")
     else:  # in place: its heavy data goes to brain.h5, which the file names
-        mm.write(paths["xdmf"])
+        from meshio.xdmf.main import XdmfWriter
+
+        # meshio leaves brain.h5 open for the garbage collector to close; closed later (in a
+        # Dask worker it was), the file changed after it was noted, and the next --overwrite
+        # refused it as not brainbulge's: close it here, before it is noted
+        XdmfWriter(paths["xdmf"], mm).h5_file.close()
         for written in (paths["xdmf"], paths["xdmf"].with_suffix(".h5")):
             if written.is_file():
                 note_written(written)  # in the output folder's manifest
