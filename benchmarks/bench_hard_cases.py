@@ -23,12 +23,13 @@ beta 60. Formulations compared for sliding contact (``--variants``):
   zero-thickness skull ends at its edge), and the skull's two edge points kept outside the tissue by
   segment contact (:mod:`edge_contact`), so that the edge cannot cut into the tissue
   between two nodes; ``edge-smooth`` against the boundary with interpolated vertex normals
-  (C1). No rezoning, no hotspot relaxation.
+  (C1), ``edge-hermite`` against cubic Hermite segments through the vertices (C1
+  positions, closest-point projection). No rezoning, no hotspot relaxation.
 
 3D (``--3d``): the six craniectomy scenarios on the demo's brain (``brainbulge study
 craniectomy --tets 30000``: Netgen gives 21k tets).
 
-Rerun with ``python benchmarks/bench_hard_cases.py`` (about 5 min on 2 cores; add ``--3d``
+Rerun with ``python benchmarks/bench_hard_cases.py`` (about 20 min on 2 cores; add ``--3d``
 for the six brain scenarios, about 2 min more). Each row runs in its own process.
 """
 
