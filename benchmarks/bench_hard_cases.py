@@ -282,8 +282,8 @@ def main() -> None:
         print("| scenario | converged | load | Newton | solve s | bulge ml | Monro mm |")
         print("|---|---|---|---|---|---|---|")
         for r in rows:
-            print(f"| {r['case']} | {r['converged']} | {r['load']} | {r['newton']} | "
-                  f"{r['solve_s']} | {r['bulge_ml']} | {r['monro_mm']} |")
+            print(f"| {r['case']} | {r['converged']} | {r['load']:.3f} | {r['newton']} | "
+                  f"{r['solve_s']:.1f} | {r['bulge_ml']:.1f} | {r['monro_mm']:+.2f} |")
 
 
 if __name__ == "__main__":
