@@ -8,6 +8,9 @@
   docs/*.md parses with the real CLI parser and selects a command.
 - ```json blocks of the pages parse; label maps among them are accepted by ``read_label_map``.
 - Relative links between the pages point to existing files and headings.
+- Code names in backticks in the pages and in the CLI's help texts (Python files such as
+  ``solver/linear/amg.py``, dotted names such as ``results.summary.exceeded_in``, UPPER_CASE
+  constants) name files, modules, attributes and constants that exist.
 """
 
 from __future__ import annotations
@@ -158,3 +161,127 @@ def test_relative_links(page: Path) -> None:
         assert dest.is_file(), f"{page.name}: link to missing {target}"
         if anchor and dest.suffix == ".md":
             assert anchor in _anchors(dest), f"{page.name}: no heading for #{anchor}"
+
+
+# --- names of the code that the docs mention ----------------------------------------------
+
+SRC = ROOT / "src" / "brainbulge"
+SPAN = re.compile(r"`+([^`\n]+?)`+")
+PY_FILE = re.compile(r"[\w*/.-]*\w\.py\b")
+DOTTED = re.compile(r"[a-z_][a-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)+")
+CONSTANT = re.compile(r"[A-Z][A-Z0-9]*(?:_[A-Z0-9]+)+")
+#: endings of file names, not of Python names (``brainbulge.log``, ``summary.json``)
+FILE_ENDINGS = {
+    "csv",
+    "gz",
+    "h5",
+    "html",
+    "json",
+    "log",
+    "md",
+    "mgz",
+    "npz",
+    "png",
+    "py",
+    "toml",
+    "txt",
+    "vtu",
+    "xdmf",
+}
+
+
+def help_texts() -> dict[str, str]:
+    """``brainbulge [command] --help`` of every command, by ``brainbulge [command]``."""
+    import argparse
+
+    parser = build_parser()
+    texts = {"brainbulge": parser.format_help()}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                texts[f"brainbulge {name}"] = sub.format_help()
+    return texts
+
+
+def code_names(text: str) -> set[str]:
+    """The code names in backticks of ``text`` (Markdown without its fenced blocks, or a
+    help text): Python files (``solver/linear/amg.py``, in a command too), dotted names
+    whose first part is ``brainbulge`` or one of its modules, and UPPER_CASE constants."""
+    modules = {p.stem for p in SRC.iterdir() if p.suffix == ".py" or (p / "__init__.py").is_file()}
+    names = set()
+    for span in SPAN.findall(FENCE.sub("", text)):
+        names.update(PY_FILE.findall(span))
+        span = span.strip()
+        parts = span.split(".")
+        if DOTTED.fullmatch(span) and parts[0] in {"brainbulge", *modules}:
+            if parts[-1] not in FILE_ENDINGS:
+                names.add(span)
+        if CONSTANT.fullmatch(span):
+            names.add(span)
+    return names
+
+
+def _source_files() -> list[Path]:
+    return [p for d in ("src", "tests", "benchmarks") for p in (ROOT / d).rglob("*.py")]
+
+
+def missing_name(name: str) -> bool:
+    """True when ``name`` (see :func:`code_names`) names nothing in the repository."""
+    import importlib
+
+    if name.endswith(".py"):
+        rel = name.removeprefix("src/brainbulge/")
+        from_root = rel.split("/")[0] in ("src", "tests", "benchmarks")  # else: a path's tail
+        return not any(
+            (p.relative_to(ROOT) if from_root else p).match(rel) for p in _source_files()
+        )
+    if CONSTANT.fullmatch(name):
+        pattern = re.compile(rf"\b{name}\b")
+        return not any(pattern.search(p.read_text(encoding="utf-8")) for p in SRC.rglob("*.py"))
+    parts = name.split(".")
+    if parts[0] != "brainbulge":
+        parts.insert(0, "brainbulge")
+    for n in range(len(parts), 0, -1):  # the longest importable module, then attributes
+        try:
+            obj = importlib.import_module(".".join(parts[:n]))
+        except ImportError:
+            continue
+        for attr in parts[n:]:
+            if not hasattr(obj, attr):
+                return True
+            obj = getattr(obj, attr)
+        return False
+    return True
+
+
+NAMED = [(page.name, page.read_text(encoding="utf-8")) for page in PAGES]
+
+
+@pytest.mark.parametrize("source,text", NAMED, ids=[n for n, _ in NAMED])
+def test_docs_name_existing_code(source: str, text: str) -> None:
+    stale = sorted(n for n in code_names(text) if missing_name(n))
+    assert not stale, f"{source} names code that does not exist: {stale}"
+
+
+def test_help_texts_name_existing_code() -> None:
+    for command, text in help_texts().items():
+        stale = sorted(n for n in code_names(text) if missing_name(n))
+        assert not stale, f"`{command} --help` names code that does not exist: {stale}"
+
+
+def test_stale_names_are_found() -> None:
+    """The check above sees a removed module, constant and attribute."""
+    text = (
+        "`solver/linear.py` and `solver/krylov.py`, `COARSE_TETS`, `results.summary.exceeded_at`, "
+        "`python benchmarks/bench_nothing.py --x 1`; these exist: `solver/linear/amg.py`, "
+        "`krylov.py`, `LARGE_TETS`, `brainbulge.heap`, `results.summary.exceeded_in`, "
+        "`summary.json`, `brainbulge.log`, `OMP_NUM_THREADS`"
+    )
+    names = code_names(text)
+    assert {n for n in names if missing_name(n)} == {
+        "solver/linear.py",
+        "solver/krylov.py",
+        "COARSE_TETS",
+        "results.summary.exceeded_at",
+        "benchmarks/bench_nothing.py",
+    }

@@ -8,11 +8,9 @@
    matter is half the paper's 1108 ml brain (10 % swelling: 55 / 28 ml, as the paper's),
    at the paper's resolution by default (the paper: 1,275,808 tets; here Netgen meshes at
    ``--tets / 8`` and the mesh is refined once, ~1.4M tets). The six scenarios share one
-   mesh (``craniectomy/mesh/``) and, from 400k tets on, one coarse mesh for mesh sequencing
-   (``craniectomy/coarse-mesh/``, a Netgen mesh of 100k tets: each scenario ramps its load
-   there and finishes on the fine mesh), the compiled energy (cached on disk) and, per
-   worker, the loaded meshes; they run one at a time (one worker: ~10 GB each at 1.4M tets)
-   with the Krylov solver.
+   mesh (``craniectomy/mesh/``), the compiled energy (cached on disk) and, per worker, the
+   loaded meshes; each ramps its load on that mesh (no mesh sequencing); from 400k tets on
+   they run one at a time (one worker: ~10 GB each at 1.4M tets) with the Krylov solver.
 
 Rerun the same command to resume: finished scenarios are kept, a scenario stopped mid-way
 goes on from its last load step. ``--tets 30000`` (21k tets) gives the 3D part in minutes.

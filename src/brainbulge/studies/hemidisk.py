@@ -200,8 +200,8 @@ def expected_cost(scenario: dict[str, Any]) -> float:
     opening's, ``alpha / beta`` (1 for a disk). A large sector pushed through a narrow opening
     folds the bulge over the opening's edges and takes the longest: in the sector study the
     three slowest were alpha 80 / beta 30 (both contacts) and sliding alpha 60 / beta 30
-    (ratios 2-2.7), 80-290 s of solve against 2-12 s for each case with a ratio of at most 1
-    (``python benchmarks/bench_hemidisk.py``)."""
+    (ratios 2-2.7), 10-20 s of solve against 0.3-2 s for each case with a ratio of at most 1
+    (docs/performance.md, "2D hemidisk")."""
     alpha = scenario.get("alpha")
     if not alpha:
         return 1.0
