@@ -403,10 +403,27 @@ def test_version() -> None:
     assert r.returncode == 0 and "brainbulge" in r.stdout
 
 
-def test_readme_python_example() -> None:
+def test_readme_python_example(capsys) -> None:
+    """The README's example solves its case: incompressible (the deformed area is the
+    swollen one, ``int J = int Js``), swelling applied, and it prints the bulge it reached
+    (0.162 R on its mesh, upward on the symmetry axis)."""
+    import ngsolve as ngs
+
     text = (ROOT / "README.md").read_text()
     code = re.search(r"## Python API\s+```python\n(.*?)```", text, re.S).group(1)
-    exec(compile(code, "README.md", "exec"), {})
+    names: dict = {}
+    exec(compile(code, "README.md", "exec"), names)
+    printed = re.fullmatch(r"bulge height (\S+) R\n", capsys.readouterr().out)
+    assert printed, "the example prints one line"
+    solution, mesh, top = names["solution"], names["mesh"], names["top"]
+    assert solution.converged and solution.load == 1.0
+    area = ngs.Integrate(ngs.CF(1), mesh)
+    swollen = ngs.Integrate(solution.form.Js, mesh)
+    deformed = ngs.Integrate(ngs.Det(ngs.Id(2) + ngs.Grad(solution.form.u)), mesh)
+    assert swollen - area > 0.05 * area  # Js = 1.2 in the sector
+    assert deformed == pytest.approx(swollen, rel=1e-8)
+    assert float(printed.group(1)) == pytest.approx(top[1], abs=5e-4)
+    assert top[1] == pytest.approx(0.162, rel=0.02) and abs(top[0]) < 0.01 * top[1]
 
 
 def test_study_passes_mesh_sizes_to_its_scenarios() -> None:
