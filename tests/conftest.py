@@ -82,3 +82,20 @@ def swollen():
     from inclusion_cases import swollen_state
 
     return swollen_state()
+
+
+@pytest.fixture
+def saved_figures(monkeypatch) -> list:
+    """The matplotlib figures written in a test (through ``Figure.savefig``), in order, for
+    a look at what a PNG shows (its axes, labels, marks) without reading pixels."""
+    from matplotlib.figure import Figure
+
+    saved = []
+    savefig = Figure.savefig
+
+    def keep(fig: Figure, *args, **kwargs) -> None:
+        saved.append(fig)
+        return savefig(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return saved

@@ -71,7 +71,7 @@ def test_plot_sections_writes_a_coloured_png(tmp_path) -> None:
     assert (saturation > 0.3).mean() > 0.05  # coloured pixels, not just axes
 
 
-def test_plot_fields_marks_the_failure_site(tmp_path, monkeypatch) -> None:
+def test_plot_fields_marks_the_failure_site(tmp_path, saved_figures) -> None:
     """A stopped run's ``failure_site`` is a red cross at that position on every panel."""
     import brainbulge.results.figures as figures
     from brainbulge.results.export import VertexFields
@@ -80,18 +80,10 @@ def test_plot_fields_marks_the_failure_site(tmp_path, monkeypatch) -> None:
     vals = np.array([0.9, 1.0, 1.1, 1.2])
     vf = VertexFields(pts, np.array([[0, 1, 3], [0, 3, 2]]), np.zeros(2, dtype=int), ["a"],
                       {"u": np.zeros((4, 2)), "lambda_n": vals, "lambda_t": vals}, {})
-    saved = {}
-    real_save = figures._save
-
-    def keep(fig, path):
-        saved["fig"] = fig
-        return real_save(fig, path)
-
-    monkeypatch.setattr(figures, "_save", keep)
     figures.plot_fields(vf, tmp_path / "f.png", fields=("lambda_n", "lambda_t"),
                         mark=(0.25, 0.4))
-    assert (tmp_path / "f.png").is_file()
-    panels = [ax for ax in saved["fig"].axes if ax.lines]  # (not the colour bars)
+    assert (tmp_path / "f.png").is_file() and len(saved_figures) == 1
+    panels = [ax for ax in saved_figures[0].axes if ax.lines]  # (not the colour bars)
     assert len(panels) == 2
     for ax in panels:
         crosses = [ln for ln in ax.lines if ln.get_marker() == "x"]

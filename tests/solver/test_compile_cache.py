@@ -52,7 +52,26 @@ def test_the_cache_can_be_turned_off(monkeypatch: pytest.MonkeyPatch) -> None:
     assert os.environ["PATH"] == path
 
 
-def test_ngscxx_is_found_next_to_the_interpreter(monkeypatch: pytest.MonkeyPatch) -> None:
+READY = """
+import logging, os
+logging.basicConfig(format="%(levelname)s %(message)s")
+from brainbulge.solver.compile_cache import native_compiler_ready
+print(native_compiler_ready(), native_compiler_ready(), os.environ["PATH"])
+"""
+
+
+def _ready_in_a_new_process(python: str, path: str) -> tuple[list[str], list[str]]:
+    """Run :data:`READY` in a new interpreter ``python`` with ``PATH=path``: the two answers
+    and ``PATH`` after them, and the lines it logged."""
+    src = str(Path(__file__).resolve().parents[2] / "src")
+    env = {"PATH": path, "HOME": os.environ.get("HOME", "/tmp"), "BRAINBULGE_NO_CCACHE": "1",
+           "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([python, "-c", READY], env=env, capture_output=True, text=True,
+                         check=True)
+    return out.stdout.split(), out.stderr.splitlines()
+
+
+def test_ngscxx_is_found_next_to_the_interpreter() -> None:
     """With a ``PATH`` that lacks the environment's ``bin/``, ``ngscxx`` is still found (where
     the ngsolve wheel installs it), and preparing to compile puts its folder first on
     ``PATH``, so that the ``python3`` it calls is this interpreter's."""
@@ -61,29 +80,23 @@ def test_ngscxx_is_found_next_to_the_interpreter(monkeypatch: pytest.MonkeyPatch
     folder = os.path.dirname(compile_cache.find_ngscxx() or "")
     if folder not in compile_cache.interpreter_scripts():
         pytest.skip("ngscxx is not installed next to this interpreter")
-    monkeypatch.setenv("PATH", "/usr/bin:/bin")
-    monkeypatch.setenv("BRAINBULGE_NO_CCACHE", "1")
-    monkeypatch.setattr(compile_cache, "_native", {})
-    assert compile_cache.native_compiler_ready() is True
-    assert os.environ["PATH"].split(os.pathsep)[0] == folder
+    answers, logged = _ready_in_a_new_process(sys.executable, "/usr/bin:/bin")
+    assert answers[:2] == ["True", "True"] and not logged
+    assert answers[2].split(os.pathsep) == [folder, "/usr/bin", "/bin"]
 
 
-def test_no_compiler_is_said_once(monkeypatch: pytest.MonkeyPatch,
-                                  caplog: pytest.LogCaptureFixture, tmp_path: Path) -> None:
-    """Without ``ngscxx`` anywhere, one warning says so and what it costs; later calls
-    return False silently and ``PATH`` is left as it was."""
-    from brainbulge.solver import compile_cache
+def test_no_compiler_is_said_once(tmp_path: Path) -> None:
+    """An interpreter without ``ngscxx`` next to it or on ``PATH`` (a virtual environment
+    made without NGSolve's scripts): one warning says so and what it costs; the second call
+    returns False silently and ``PATH`` is left as it was."""
+    import venv
 
-    monkeypatch.setattr(compile_cache, "interpreter_scripts", lambda: [])
-    monkeypatch.setattr(compile_cache, "_native", {})
-    monkeypatch.setenv("PATH", str(tmp_path))
-    with caplog.at_level("WARNING", logger="brainbulge"):
-        assert compile_cache.native_compiler_ready() is False
-        assert compile_cache.native_compiler_ready() is False
-    warnings = [r.getMessage() for r in caplog.records]
-    assert len(warnings) == 1
-    assert "ngscxx not found" in warnings[0] and "uncompiled" in warnings[0]
-    assert os.environ["PATH"] == str(tmp_path)
+    venv.create(tmp_path / "env", system_site_packages=True, symlinks=True)
+    python = str(tmp_path / "env" / "bin" / "python")
+    answers, logged = _ready_in_a_new_process(python, str(tmp_path))
+    assert answers == ["False", "False", str(tmp_path)]
+    assert len(logged) == 1 and logged[0].startswith("WARNING"), logged
+    assert "ngscxx not found" in logged[0] and "uncompiled" in logged[0]
 
 
 def test_importing_the_solver_leaves_the_environment_alone() -> None:

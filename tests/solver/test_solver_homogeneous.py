@@ -143,8 +143,36 @@ def test_closed_domain_is_infeasible(box2d) -> None:
 
 
 def test_closed_domain_without_swelling_is_fine(box2d) -> None:
+    """Every boundary clamped and ``Js = 1``: the rest state, ``u = 0`` and ``p = 0``."""
     problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.0}, clamped="xmin|ymin|xmax|free")
-    assert solve(problem).converged
+    sol = solve(problem)
+    assert sol.converged and sol.load == 1.0
+    assert _l2_error(box2d, sol.form.u, ngs.CF((0, 0))) == 0.0
+    assert _l2_error(box2d, sol.form.p, ngs.CF(0)) == 0.0
+
+
+def test_closed_domain_whose_swelling_adds_no_volume_is_solved() -> None:
+    """A clamped quarter disk (radius 1) whose inclusion (radius ``A``) swells by ``Js`` and
+    whose matrix shrinks by ``Jm`` with ``int (Js - 1) dV = 0``: not infeasible, and the
+    incompressible radial answer holds, ``r = sqrt(Js) R`` for ``R < A`` and
+    ``r^2 = Js A^2 + Jm (R^2 - A^2)`` outside (``r = 1`` at the clamped rim)."""
+    from brainbulge.geometry.inclusion import inclusion_mesh
+
+    A, Js = 0.5, 1.3
+    mesh = inclusion_mesh(2, A=A, h=0.2, h_inclusion=0.1)
+    area = {r: ngs.Integrate(ngs.CF(1), mesh, definedon=mesh.Materials(r))
+            for r in ("inclusion", "matrix")}
+    Jm = 1 - (Js - 1) * area["inclusion"] / area["matrix"]  # no net volume on this mesh
+    problem = Problem(mesh, {"inclusion": GRAY, "matrix": GRAY},
+                      {"inclusion": Js, "matrix": Jm}, clamped="outer",
+                      clamped_components={0: "sym_x", 1: "sym_y"})
+    sol = solve(problem)
+    assert sol.converged and sol.load == 1.0
+    for R in (0.2, 0.4, 0.6, 0.8, 0.95):
+        X = np.array([R, R]) / np.sqrt(2)
+        r = np.linalg.norm(X + np.array(sol.form.u(mesh(*X))))
+        exact = np.sqrt(Js) * R if R < A else np.sqrt(Js * A**2 + Jm * (R**2 - A**2))
+        assert r == pytest.approx(exact, abs=1e-4), R
 
 
 def _two_zone_inclusion() -> Problem:

@@ -9,7 +9,6 @@ import json
 
 import numpy as np
 
-import brainbulge.results.figures as figures
 from brainbulge.results.export import VertexFields
 from brainbulge.studies import hemidisk as hd
 
@@ -59,19 +58,12 @@ def test_table_keeps_a_stopped_scenarios_partial_results(tmp_path) -> None:
     assert table["60.0"]["load_reached"] == "" and table["60.0"]["error"] == "mesh failed"
 
 
-def test_grid_draws_a_stopped_scenario_labelled(tmp_path, monkeypatch) -> None:
+def test_grid_draws_a_stopped_scenario_labelled(tmp_path, saved_figures) -> None:
     scenarios, rows = _study(tmp_path)
-    saved = []
-    real_save = figures._save
-
-    def keep(fig, path):
-        saved.append(fig)
-        return real_save(fig, path)
-
-    monkeypatch.setattr(figures, "_save", keep)
     paths = hd.sector_figures(tmp_path, scenarios, rows)
     assert [p.name for p in paths] == ["grid_lambda_n_sliding.png", "grid_lambda_t_sliding.png"]
-    fig = saved[0]
+    assert all(p.is_file() for p in paths) and len(saved_figures) == 2
+    fig = saved_figures[0]
     cells = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"][:3]  # alpha 20, 40, 60
     notes = [[t.get_text() for t in ax.texts if t.get_color() == "red"] for ax in cells]
     assert notes == [[], ["stopped at Js 1.100"], ["no result"]]  # 1 + 0.5 (1.2 - 1)

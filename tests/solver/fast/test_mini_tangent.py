@@ -7,6 +7,7 @@ path with it against the path with NGSolve's residual and tangent.
 
 from __future__ import annotations
 
+import ngsolve as ngs
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -124,14 +125,65 @@ def test_other_forms_keep_ngsolves_tangent() -> None:
 
 
 
-def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(monkeypatch, caplog) -> None:
-    def unexpected(self, fes) -> None:
-        raise ValueError("unexpected DOF numbering of element 0")
+def _fan_octant(n: int) -> ngs.Mesh:
+    """Octant of the unit ball as a fan of ``n^2`` straight tets around the centre (every tet
+    shares the centre vertex: the element loop needs ``n^2`` colours); boundaries ``free``
+    (the sphere), ``xmin``, ``ymin``, ``zmin``; region ``tissue``."""
+    from netgen.csg import Pnt
+    from netgen.meshing import Element2D, Element3D, FaceDescriptor, MeshPoint
+    from netgen.meshing import Mesh as NetgenMesh
 
-    monkeypatch.setattr(MiniTangent, "_check_dofs", unexpected)
-    ns = NewtonSolver(MixedForm(_problem(), element="mini"))
-    assert ns.closed is None
-    assert "closed-form tangent not used" in caplog.text
+    index, points = {}, [np.zeros(3)]
+    for i in range(n + 1):  # the octahedron's face i + j + k = n, projected to the sphere
+        for j in range(n + 1 - i):
+            index[i, j] = len(points)
+            p = np.array([i, j, n - i - j], float)
+            points.append(p / np.linalg.norm(p))
+    triangles = [(index[i, j], index[i + 1, j], index[i, j + 1])
+                 for i in range(n) for j in range(n - i)]
+    triangles += [(index[i + 1, j], index[i + 1, j + 1], index[i, j + 1])
+                  for i in range(n) for j in range(n - i - 1)]
+    m = NetgenMesh(dim=3)
+    ids = [m.Add(MeshPoint(Pnt(*p))) for p in points]
+    for k, name in enumerate(("free", "xmin", "ymin", "zmin")):
+        m.Add(FaceDescriptor(surfnr=k + 1, domin=1, domout=0, bc=k + 1))
+        m.SetBCName(k, name)
+    m.SetMaterial(1, "tissue")
+    P = np.array(points)
+    for a, b, c in triangles:
+        if np.linalg.det(P[[a, b, c]]) < 0:
+            b, c = c, b
+        m.Add(Element3D(1, [ids[0], ids[a], ids[b], ids[c]]))
+        m.Add(Element2D(1, [ids[a], ids[c], ids[b]]))
+        for axis in range(3):  # an edge on a coordinate plane closes it with the centre
+            for e0, e1 in ((a, b), (b, c), (c, a)):
+                if P[e0, axis] == 0 and P[e1, axis] == 0:
+                    m.Add(Element2D(axis + 2, [ids[0], ids[e0], ids[e1]]))
+    return ngs.Mesh(m)
+
+
+def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(caplog) -> None:
+    """A mesh whose element loop needs more than 128 colours (144 tets around one vertex)
+    is solved with NGSolve's tangent, saying so, and right (free swelling, ``u = (Js^(1/3)
+    - 1) X``); 121 tets around one vertex still take the closed form."""
+    import logging
+
+    Js = 1.3
+    X = ngs.CF((ngs.x, ngs.y, ngs.z))
+    for n, closed in ((11, True), (12, False)):
+        mesh = _fan_octant(n)
+        problem = Problem(mesh, {"tissue": STIFF}, {"tissue": Js},
+                          clamped_components={0: "xmin", 1: "ymin", 2: "zmin"})
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="brainbulge"):
+            ns = NewtonSolver(MixedForm(problem, element="mini"))
+            sol = ns.solve()
+        assert (ns.closed is not None) == closed
+        warned = "closed-form tangent not used (more than 128 colours" in caplog.text
+        assert warned != closed, caplog.text
+        assert sol.converged
+        error = sol.form.u - (Js ** (1 / 3) - 1) * X
+        assert ngs.Integrate(ngs.InnerProduct(error, error), mesh) ** 0.5 < 1e-10
 
 
 def test_hotspot_local_problems_take_the_same_element_systems_as_ngsolves(form_and_state) -> None:
