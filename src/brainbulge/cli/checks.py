@@ -18,19 +18,10 @@ from pathlib import Path
 from typing import Any, Union
 
 from brainbulge.errors import InputError
+from brainbulge.model.options import number
 
 log = logging.getLogger(__name__)
 
-#: hemidisk element sizes [units of R]: 0.005 R makes ~150,000 triangles (P2: hours of
-#: Newton); a corner or rim size below 1e-4 R makes Netgen grade over 4 decades
-HEMIDISK_H = (0.005, 1.0)
-HEMIDISK_LOCAL_H_MIN = 1e-4
-#: hemidisk radius [length]: Netgen's absolute tolerances break far outside
-HEMIDISK_R = (1e-3, 1e4)
-#: target Js, as for the brain
-SWELLING = (0.5, 2.0)
-#: edge exclusion around the singular points [units of R]; beyond, max_*/min_* cover little
-HEMIDISK_EDGE_EXCLUSION = (0.0, 0.2)
 #: initial load steps
 STEPS = (1, 1000)
 #: tets of a brain mesh: more than 5 million need more memory than a workstation has
@@ -55,18 +46,6 @@ SCHEDULER_PROBE_S = 5.0
 
 
 # --------------------------------------------------------------------------- generic
-
-
-def number(name: str, value: Any, lo: float, hi: float, unit: str = "",
-           integer: bool = False, hint: str = "") -> None:
-    """``lo <= value <= hi`` (a finite number; a whole one if ``integer``)."""
-    ok = isinstance(value, int | float) and not isinstance(value, bool)
-    if ok and integer:
-        ok = isinstance(value, int)
-    if not (ok and math.isfinite(value) and lo <= value <= hi):
-        kind, fmt = ("a whole number", "{:,.0f}") if integer else ("a number", "{:g}")
-        raise InputError(f"{name} = {value!r} must be {kind} in [{fmt.format(lo)}, "
-                         f"{fmt.format(hi)}]{unit}" + (f" ({hint})" if hint else ""))
 
 
 def _describe(tp: Any) -> str:
@@ -131,28 +110,7 @@ def hemidisk_case(config: dict[str, Any]) -> Any:
     from brainbulge.studies.hemidisk import case_from_dict
 
     check_types(HemidiskCase, {k: v for k, v in config.items() if k != "name"}, "hemidisk")
-    disk = config.get("disk")
-    if disk is not None:
-        if len(disk) != 3 or not all(math.isfinite(v) for v in disk):
-            raise InputError(f"disk {disk} needs three finite numbers: CX CY RADIUS")
-        number("disk radius", disk[2], 1e-3, 0.9, " R", hint="the swelling disk's size")
-    case = case_from_dict(config)
-    for name, value, lo in (("opening angle beta", case.beta, 0.0),
-                            ("opening centre", case.opening_center, 0.0),
-                            ("sector angle alpha", case.alpha, 1e-3)):
-        if value is not None:
-            number(name, value, lo, 180.0, " deg")
-    number("radius R", case.R, *HEMIDISK_R, hint="lengths scale with R: R = 1 is usual")
-    number("swelling Js", case.swelling, *SWELLING, hint="1.2 = 20% swelling")
-    number("steps", case.steps, *STEPS, integer=True)
-    number("mesh size", case.mesh_size, *HEMIDISK_H, " R",
-           hint="smaller meshes take hours: 0.005 R is ~150,000 triangles")
-    for name in ("corner_mesh_size", "rim_mesh_size"):
-        value = getattr(case, name)
-        if value is not None:
-            number(name.replace("_", " "), value, HEMIDISK_LOCAL_H_MIN, case.mesh_size, " R",
-                   hint="at most the mesh size")
-    number("edge exclusion", case.edge_exclusion, *HEMIDISK_EDGE_EXCLUSION, " R")
+    case = case_from_dict(config)  # the case checks its own ranges
     case.geometry  # noqa: B018 - angles, opening, disk position
     case.rigid_skull  # noqa: B018 - cut-edge radius against the skull's thickness
     case.tissue_material()

@@ -29,6 +29,7 @@ active set.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import ngsolve as ngs
@@ -37,44 +38,77 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.hemidisk import Hemidisk
 from brainbulge.geometry.skull2d import RigidSkull2D, SkullArc2D
 from brainbulge.materials import MooneyRivlin, preset
+from brainbulge.model.options import check_ranges, number, option, solver_fields
 from brainbulge.model.problem import Contact, Problem
 
 CONTACTS = ("sliding", "noslip")
 SKULLS = ("paper", "rigid")
-
-#: the fields of :class:`HemidiskCase` that say how it is discretised and solved (the
-#: ``[solver]`` table of a run file); the others say what is simulated (``[case]``)
-SOLVER_FIELDS = ("mesh_size", "corner_mesh_size", "rim_mesh_size", "steps", "element",
-                 "rezone", "contact_method")
+ELEMENTS = ("mini", "taylor-hood")
+#: target Js of a swelling sector (the paper's Figures 2-3) and of a swelling disk (its
+#: Figure 4): the default of :attr:`HemidiskCase.swelling`
+SECTOR_SWELLING = 1.2
+DISK_SWELLING = 1.3
+#: target Js, as for the brain
+SWELLING_RANGE = (0.5, 2.0)
+#: element sizes [units of R]: 0.005 R makes ~150,000 triangles (P2: hours of Newton); a
+#: corner or rim size below 1e-4 R makes Netgen grade over 4 decades
+MESH_SIZE_RANGE = (0.005, 1.0)
+LOCAL_MESH_SIZE_MIN = 1e-4
 
 
 @dataclass
 class HemidiskCase:
     """One hemidisk run, a plain value that round-trips through TOML.
 
-    Angles in degrees, lengths in units of ``R`` unless ``R`` is given otherwise.
+    Angles in degrees, lengths in units of ``R`` unless ``R`` is given otherwise. Each field
+    is declared once with its default, unit, range and help (:func:`option`); the ranges are
+    checked here, and the command line ``brainbulge hemidisk`` is built from these fields.
     """
 
-    alpha: float | None = 80.0
-    beta: float = 60.0
-    opening_center: float = 90.0
-    disk: list[float] | None = None
-    swelling: float = 1.2
-    contact: str = "sliding"
-    skull: str = "paper"
-    R: float = 1.0
-    mesh_size: float = 0.05
-    corner_mesh_size: float | None = None
-    rim_mesh_size: float | None = None
-    steps: int = 4
-    element: str = "mini"
-    material: str = "paper"
-    tissue: str = "gray"
-    skull_thickness: float = 0.2
-    skull_edge_radius: float = 0.05
-    edge_exclusion: float = 0.05
-    rezone: bool = True
-    name: str = "hemidisk"
+    alpha: float | None = option(80.0, "swelling sector angle", unit=" deg", range=(1e-3, 180.0),
+                                 label="sector angle alpha")
+    beta: float = option(60.0, "opening angle", unit=" deg", range=(0.0, 180.0),
+                         label="opening angle beta")
+    opening_center: float = option(90.0, "angle of the opening's centre (90 = symmetry axis)",
+                                   unit=" deg", range=(0.0, 180.0), label="opening centre")
+    disk: list[float] | None = option(None, "a swelling disk instead of a sector",
+                                      unit=" R", metavar=("CX", "CY", "RADIUS"))
+    swelling: float | None = option(
+        None, "target swelling Js of the sector or disk", range=SWELLING_RANGE,
+        label="swelling Js", hint=f"{SECTOR_SWELLING:g} = {SECTOR_SWELLING - 1:.0%} swelling")
+    contact: str = option("sliding", "contact of the tissue with the skull: frictionless "
+                          "sliding or no-slip", choices=CONTACTS)
+    skull: str = option(
+        "paper", "paper: the paper's zero-thickness skull arc with a sharp edge, the opening "
+        "traction-free; rigid: a rigid shell of finite thickness with rounded cut edges, also "
+        "in contact with the opening (an extension, docs/model.md)", choices=SKULLS)
+    R: float = option(1.0, "hemidisk radius [length]", range=(1e-3, 1e4), label="radius R",
+                      flag="--radius", hint="lengths scale with R: R = 1 is usual")
+    mesh_size: float = option(0.05, "element size", unit=" R", range=MESH_SIZE_RANGE,
+                              solver=True,
+                              hint="smaller meshes take hours: 0.005 R is ~150,000 triangles")
+    corner_mesh_size: float | None = option(
+        None, "element size at the singular points (default mesh size / 5)", unit=" R",
+        range=(LOCAL_MESH_SIZE_MIN, "mesh_size"), hint="at most the mesh size", solver=True)
+    rim_mesh_size: float | None = option(
+        None, "element size on the circles of radius edge exclusion around the singular "
+        "points, where the max_*/min_* extremes sit (default mesh size / 10)", unit=" R",
+        range=(LOCAL_MESH_SIZE_MIN, "mesh_size"), hint="at most the mesh size", solver=True)
+    steps: int = option(4, "initial number of load steps", range=(1, 1000), solver=True)
+    element: str = option("mini", "MINI (P1 + bubble / P1) or Taylor-Hood (P2/P1)",
+                          choices=ELEMENTS, solver=True)
+    material: str = option("paper", "tissue preset: paper or paper-pa")
+    tissue: str = option("gray", "tissue of the preset", internal=True)
+    skull_thickness: float = option(0.2, "thickness of the rigid skull", unit=" R",
+                                    internal=True)
+    skull_edge_radius: float = option(
+        0.05, "rounding radius of the rigid skull's cut edge (skull rigid)", unit=" R")
+    edge_exclusion: float = option(
+        0.05, "radius around the singular points left out of max_*/min_*", unit=" R",
+        range=(0.0, 0.2), hint="beyond, max_*/min_* cover little")
+    rezone: bool = option(True, "remesh through the deformation when the deformed mesh "
+                          "degenerates or a load step fails (docs/design.md)", solver=True)
+    name: str = option("hemidisk", "the run's name", internal=True)
 
     def __post_init__(self) -> None:
         if self.contact not in CONTACTS:
@@ -82,28 +116,21 @@ class HemidiskCase:
         if self.skull not in SKULLS:
             raise InputError(f"skull {self.skull!r} unknown; choose 'paper' (the paper's arc) "
                              "or 'rigid' (a rigid shell with rounded cut edges)")
-        import math
-
-        if not isinstance(self.swelling, (int, float)) or not math.isfinite(self.swelling):
-            raise InputError(f"swelling Js = {self.swelling!r} must be a number")
-        if self.swelling <= 0:
-            raise InputError(f"swelling Js = {self.swelling} must be positive (1.2 = 20% swelling)")
         if not isinstance(self.rezone, bool):
             raise InputError(f"rezone = {self.rezone!r} must be true or false")
-        if self.edge_exclusion < 0:
-            raise InputError(f"edge exclusion {self.edge_exclusion} must be >= 0")
-        for name in ("corner_mesh_size", "rim_mesh_size"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
-                raise InputError(f"{name.replace('_', ' ')} {value} must be a positive number")
-        if self.disk is not None and self.alpha is not None:
+        if self.disk is not None:
+            if len(self.disk) != 3 or not all(isinstance(v, int | float) and math.isfinite(v)
+                                              for v in self.disk):
+                raise InputError(f"disk {self.disk} needs three finite numbers: CX CY RADIUS")
+            number("disk radius", self.disk[2], 1e-3, 0.9, " R", hint="the swelling disk's size")
             self.alpha = None  # a disk replaces the default sector
+        if self.swelling is None:
+            self.swelling = DISK_SWELLING if self.disk is not None else SECTOR_SWELLING
+        check_ranges(self)
 
     @property
     def geometry(self) -> Hemidisk:
         disk = tuple(self.disk) if self.disk is not None else None
-        if disk is not None and len(disk) != 3:
-            raise InputError("disk needs three numbers: CX CY RADIUS")
         return Hemidisk(
             R=self.R,
             alpha_deg=self.alpha,
@@ -183,3 +210,8 @@ def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Proble
         mesh, materials, swelling, clamped="base",
         contacts=[Contact(sliding, skull)],
     )
+
+
+#: the fields of :class:`HemidiskCase` that say how it is discretised and solved (the
+#: ``[solver]`` table of a run file); the others say what is simulated (``[case]``)
+SOLVER_FIELDS = solver_fields(HemidiskCase)

@@ -7,9 +7,10 @@ early keeps the last converged state on disk, marked ``"converged": false``, and
 
 Studies:
 
-- ``hemidisk-sector``: alpha x beta x {noslip, sliding} at Js = 1.2;
-- ``hemidisk-disk``: five positions of a swelling disk (Js = 1.3) under an opening inclined
-  off the symmetry axis, sliding contact.
+- ``hemidisk-sector``: alpha x beta x {noslip, sliding} at the case's sector swelling
+  (Js = 1.2);
+- ``hemidisk-disk``: five positions of a swelling disk (the case's disk swelling, Js = 1.3)
+  under an opening inclined off the symmetry axis, sliding contact.
 """
 
 from __future__ import annotations
@@ -23,7 +24,12 @@ from typing import Any
 import numpy as np
 
 from brainbulge.errors import ConvergenceError, InputError
-from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+from brainbulge.model.hemidisk import (
+    DISK_SWELLING,
+    SECTOR_SWELLING,
+    HemidiskCase,
+    hemidisk_problem,
+)
 from brainbulge.model.problem import case_from_config
 from brainbulge.results.export import (
     add_contact_fields,
@@ -54,7 +60,7 @@ SECTOR_BETAS = (30.0, 60.0, 90.0, 120.0)
 DISK_OPENING_CENTER = 60.0
 #: (label, angle of the disk's centre [deg], its distance from the hemidisk's centre [R], its
 #: radius [R]): five disks on one arc, under the opening's far edge, its centre and its edge on
-#: the axis, then under the skull 30 and 60 deg past that edge (swelling Js 1.3).
+#: the axis, then under the skull 30 and 60 deg past that edge.
 DISK_POSITIONS = (
     ("edge-30", 30.0, 0.55, 0.15),
     ("centre-60", 60.0, 0.55, 0.15),
@@ -168,7 +174,7 @@ def sector_scenarios(
             "alpha": float(alpha),
             "beta": float(beta),
             "contact": contact,
-            "swelling": common.get("swelling", 1.2),
+            "swelling": common.get("swelling", SECTOR_SWELLING),
         }
         for contact in contacts
         for beta in betas
@@ -178,7 +184,8 @@ def sector_scenarios(
 
 def disk_scenarios(**common: Any) -> list[dict[str, Any]]:
     """The five disk positions of :data:`DISK_POSITIONS` (the paper's Figure 4) under the
-    inclined opening of :data:`DISK_OPENING_CENTER`, sliding contact, Js = 1.3."""
+    inclined opening of :data:`DISK_OPENING_CENTER`, sliding contact, the case's disk swelling
+    (:data:`~brainbulge.model.hemidisk.DISK_SWELLING`) unless ``common`` gives one."""
     return [
         {
             "name": f"disk_{label}",
@@ -188,7 +195,7 @@ def disk_scenarios(**common: Any) -> list[dict[str, Any]]:
             "disk": [round(dist * math.cos(math.radians(angle)), 6),
                      round(dist * math.sin(math.radians(angle)), 6), radius],
             "contact": "sliding",
-            "swelling": common.get("swelling", 1.3),
+            "swelling": common.get("swelling", DISK_SWELLING),
         }
         for label, angle, dist, radius in DISK_POSITIONS
     ]
@@ -328,8 +335,9 @@ def disk_figures(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list
     if not panels:
         return []
     paths = [plot_row(panels, f, out_dir / f"disk_{f}.png") for f in ("lambda_n", "lambda_t")]
-    opening = case_from_dict({k: v for k, v in scenarios[0].items() if k != "name"}).geometry
+    case = case_from_dict({k: v for k, v in scenarios[0].items() if k != "name"})
     paths.append(plot_rows(panels, ("lambda_n", "lambda_t"), out_dir / "disk_panel.png",
-                           title="swelling disk, Js 1.3, sliding: lambda_n (top), lambda_t",
-                           opening_deg=opening.opening_angles_deg))
+                           title=f"swelling disk, Js {case.swelling:g}, {case.contact}: "
+                           "lambda_n (top), lambda_t",
+                           opening_deg=case.geometry.opening_angles_deg))
     return paths
