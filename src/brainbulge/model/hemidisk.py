@@ -31,15 +31,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-import ngsolve as ngs
+from typing import TYPE_CHECKING
 
 from brainbulge.errors import InputError
-from brainbulge.geometry.hemidisk import Hemidisk
-from brainbulge.geometry.skull2d import RigidSkull2D, SkullArc2D
-from brainbulge.materials import MooneyRivlin, preset
 from brainbulge.model.options import check_ranges, number, option, solver_fields
-from brainbulge.model.problem import Contact, Problem
+
+if TYPE_CHECKING:  # loaded on use: the command line's parser reads the case without NGSolve
+    import ngsolve as ngs
+
+    from brainbulge.geometry.hemidisk import Hemidisk
+    from brainbulge.geometry.skull2d import RigidSkull2D, SkullArc2D
+    from brainbulge.materials import MooneyRivlin
+    from brainbulge.model.problem import Problem
 
 CONTACTS = ("sliding", "noslip")
 SKULLS = ("paper", "rigid")
@@ -130,6 +133,8 @@ class HemidiskCase:
 
     @property
     def geometry(self) -> Hemidisk:
+        from brainbulge.geometry.hemidisk import Hemidisk
+
         disk = tuple(self.disk) if self.disk is not None else None
         return Hemidisk(
             R=self.R,
@@ -166,11 +171,15 @@ class HemidiskCase:
     @property
     def skull_arc(self) -> SkullArc2D:
         """The paper's skull: the arc ``r = R`` outside the opening."""
+        from brainbulge.geometry.skull2d import SkullArc2D
+
         return SkullArc2D(R=self.R, beta_deg=self.beta, center_deg=self.opening_center)
 
     @property
     def rigid_skull(self) -> RigidSkull2D:
         """The rigid shell of the ``rigid`` skull (its parameters are checked for either)."""
+        from brainbulge.geometry.skull2d import RigidSkull2D
+
         return RigidSkull2D(
             R=self.R,
             beta_deg=self.beta,
@@ -185,6 +194,8 @@ class HemidiskCase:
         return self.skull_arc if self.skull == "paper" else self.rigid_skull
 
     def tissue_material(self) -> MooneyRivlin:
+        from brainbulge.materials import preset
+
         mats = preset(self.material)
         if self.tissue not in mats:
             raise InputError(f"tissue {self.tissue!r} not in preset {self.material!r}")
@@ -194,6 +205,8 @@ class HemidiskCase:
 def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Problem:
     """Mesh the hemidisk (or take ``mesh``, e.g. a rezoned one) and set materials, swelling
     and the contact condition."""
+    from brainbulge.model.problem import Contact, Problem
+
     skull = case.obstacle
     if mesh is None:
         mesh = case.mesh()
