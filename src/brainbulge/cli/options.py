@@ -36,12 +36,16 @@ def _help(f: dataclasses.Field, default_text: str | None) -> str:
 
 
 def add_case_options(p: argparse.ArgumentParser, cls: type,
-                     default_text: dict[str, str] | None = None) -> None:
-    """One option per command-line field of case ``cls``; an option left out is absent from
-    the parsed arguments, so the case's default applies. ``default_text``: how the help
-    states a default that depends on other fields (field name -> text)."""
+                     default_text: dict[str, str] | None = None,
+                     names: tuple[str, ...] | None = None) -> None:
+    """One option per command-line field of case ``cls`` (those of ``names`` if given); an
+    option left out is absent from the parsed arguments, so the case's default applies.
+    ``default_text``: how the help states a default that depends on other fields (field
+    name -> text)."""
     hints = typing.get_type_hints(cls)
     for f in cli_fields(cls):
+        if names is not None and f.name not in names:
+            continue
         tp = [a for a in typing.get_args(hints[f.name]) if a is not type(None)] or [hints[f.name]]
         kw: dict[str, Any] = {"dest": f.name, "default": argparse.SUPPRESS,
                               "help": _help(f, (default_text or {}).get(f.name))}

@@ -10,8 +10,12 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_output_options, finish_run, start_run, whole_number
+from brainbulge.cli.options import add_case_options
 from brainbulge.errors import InputError, StudyIncomplete
 from brainbulge.studies.suites import STUDIES
+
+#: the hemidisk case's options a hemidisk study takes from the command line
+HEMIDISK_OPTIONS = ("mesh_size", "corner_mesh_size", "rim_mesh_size", "skull")
 
 
 def add_parser(sub: Any) -> None:
@@ -24,13 +28,10 @@ def add_parser(sub: Any) -> None:
         "'serial' runs in this process",
     )
     p.add_argument("--workers", type=int, default=None, help="local worker processes")
-    p.add_argument("--mesh-size", type=float, default=0.05, help="element size [units of R]")
-    p.add_argument("--corner-mesh-size", type=float, default=None,
-                   help="element size at the singular points [units of R] (default h/5)")
-    p.add_argument("--rim-mesh-size", type=float, default=None,
-                   help="element size on the edge-exclusion circles [units of R] (default h/10)")
-    p.add_argument("--skull", choices=("paper", "rigid"), default="paper",
-                   help="2D skull model (hemidisk studies): the paper's arc or a rigid shell")
+    from brainbulge.model.hemidisk import HemidiskCase
+
+    hemidisk = p.add_argument_group("hemidisk studies (options of the case)")
+    add_case_options(hemidisk, HemidiskCase, names=HEMIDISK_OPTIONS)  # type: ignore[arg-type]
     p.add_argument("--tets", type=whole_number("--tets"), default=30_000,
                    help="brain mesh size in tets (craniectomy study)")
     p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
@@ -60,9 +61,12 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
             tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps,
             fix=args.fix,
         )
-    common = {"mesh_size": args.mesh_size, "steps": args.steps, "skull": args.skull}
-    for key in ("corner_mesh_size", "rim_mesh_size"):  # only when given: a rerun of an
-        if getattr(args, key) is not None:  # older study folder keeps its scenarios
+    from brainbulge.model.hemidisk import HemidiskCase
+
+    common = {"mesh_size": HemidiskCase.mesh_size, "steps": args.steps,
+              "skull": HemidiskCase.skull}  # recorded in every scenario
+    for key in HEMIDISK_OPTIONS:  # the others only when given: a rerun of an older study
+        if hasattr(args, key):  # folder keeps its scenarios
             common[key] = getattr(args, key)
     if name == "hemidisk-sector":
         return hd.sector_scenarios(
