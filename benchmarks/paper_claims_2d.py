@@ -9,6 +9,9 @@ import numpy as np
 
 from paper_run import MARKED, WAITING, Row, Run, up_to
 
+#: docs/model.md's section on the 2D skull, as a link from docs/paper.md
+SKULL_SECTION = "model.md#10-the-2d-skull-the-papers-arc-default-and-a-rigid-shell-extension"
+
 
 # --- 2D measures ------------------------------------------------------------------------
 def _angle_from_axis(p) -> float:
@@ -89,7 +92,7 @@ def m_sliding_rotation(run: Run) -> Row:
     why = []
     if towards < 0.1:
         why.append("the tissue at the edge slides under the skull, away from the opening, not "
-                   "out of it (the paper's sharp-edged arc; docs/model.md section 10)")
+                   f"out of it (the paper's sharp-edged arc; [model.md]({SKULL_SECTION}))")
     if not turns:
         why.append("the tissue next to the edge does not turn out more with sliding")
     return Row(ours, "differs" if not (slides and turns) else "holds", "; ".join(why))

@@ -37,7 +37,7 @@ _NO_WRITE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG)
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (e.g. a batch system's time limit) or SIGHUP (the terminal or SSH session
+    """SIGTERM (e.g. a batch system's time limit) or SIGHUP (the terminal or SSH connection
     closed): handled as an interruption."""
 
     def __init__(self, signum: int = signal.SIGTERM) -> None:
