@@ -4,10 +4,11 @@ carried-over state, through stiffer soft regions first.
 Newton's tangent on a fine brain mesh loses definiteness where the ultrasoft CSF (``mu`` 33 kPa
 against 333-666 kPa in the parenchyma, docs/model.md section 2) is pressed onto the skull's
 rounded cut edge: the contacts' curvature term ``A_i lambda_i / r`` outweighs the CSF's
-stiffness, and from a state carried over from a coarse mesh Newton stagnates at the flap's
-rim (docs/known-limits.md). With the CSF as stiff as gray matter the same fine stage
-converges in a few iterations. So the fine stage walks a path in the materials' parameters instead, as the load ramp walks one in
-``Js``: each region's shear modulus is raised to at least ``mu_max / kappa``,
+stiffness, and from a state carried over from a coarse mesh Newton stagnates at the flap's rim
+(docs/known-limits.md). With the CSF as stiff as gray matter the same fine stage converges in a
+few iterations. So the fine stage walks a path in the materials' parameters instead, as the
+load ramp walks one in ``Js``: each region's shear modulus is raised to at least ``mu_max /
+kappa``,
 
     mu_r(kappa) = max(mu_r, mu_max / kappa)       (c1, c2 or c_i scaled alike: c1/c2 kept),
 
