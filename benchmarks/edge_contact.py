@@ -166,14 +166,14 @@ class EdgeContact:
         lam = self.lam if lam is None else lam
         for k in np.flatnonzero(lam != 0):
             grad, dofs = self._local(int(k))
-            R[dofs] -= self.weights[k] * lam[k] * grad
+            np.add.at(R, dofs, -self.weights[k] * lam[k] * grad)  # a DOF may repeat
 
     def B(self, rows: np.ndarray) -> sp.csr_matrix:
         """Constraint rows ``A_k grad g_k`` (full DOF numbering) of the points ``rows``."""
         r, c, v = [], [], []
         for m, k in enumerate(rows):
             grad, dofs = self._local(int(k))
-            r += [m] * 4
+            r += [m] * len(dofs)
             c += list(dofs)
             v += list(self.weights[k] * grad)
         return sp.csr_matrix((v, (r, c)), shape=(len(rows), self.ndof))
@@ -184,8 +184,8 @@ class EdgeContact:
         for k in np.flatnonzero(self.lam != 0):
             _, dofs = self._local(int(k))
             block = self.weights[k] * self.lam[k] * self._hessian(int(k))
-            r += list(np.repeat(dofs, 4))
-            c += list(np.tile(dofs, 4))
+            r += list(np.repeat(dofs, len(dofs)))
+            c += list(np.tile(dofs, len(dofs)))
             v += list(block.ravel())
         return sp.csr_matrix((v, (r, c)), shape=(self.ndof, self.ndof))
 
@@ -410,32 +410,6 @@ class SmoothEdgeContact(EdgeContact):
             e[j] = delta
             H[:, j] = (self._grad_at(k, z + e) - self._grad_at(k, z - e)) / (2 * delta)
         return 0.5 * (H + H.T)
-
-    def add_forces(self, R: np.ndarray, lam: np.ndarray | None = None) -> None:
-        lam = self.lam if lam is None else lam
-        for k in np.flatnonzero(lam != 0):
-            grad, dofs = self._local(int(k))
-            np.add.at(R, dofs, -self.weights[k] * lam[k] * grad)
-
-    def B(self, rows: np.ndarray) -> sp.csr_matrix:
-        r, c, v = [], [], []
-        for m, k in enumerate(rows):
-            grad, dofs = self._local(int(k))
-            r += [m] * len(dofs)
-            c += list(dofs)
-            v += list(self.weights[k] * grad)
-        return sp.csr_matrix((v, (r, c)), shape=(len(rows), self.ndof))
-
-    def curvature(self) -> sp.csr_matrix:
-        r, c, v = [], [], []
-        for k in np.flatnonzero(self.lam != 0):
-            _, dofs = self._local(int(k))
-            block = self.weights[k] * self.lam[k] * self._hessian(int(k))
-            n = len(dofs)
-            r += list(np.repeat(dofs, n))
-            c += list(np.tile(dofs, n))
-            v += list(block.ravel())
-        return sp.csr_matrix((v, (r, c)), shape=(self.ndof, self.ndof))
 
 
 def _hermite(z, xi):
