@@ -6,19 +6,8 @@ The names are loaded on first use, so the cases' option declarations
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from brainbulge.lazy import lazy_names
 
 __all__ = ["Contact", "Obstacle", "Problem"]
 
-
-def __getattr__(name: str) -> Any:
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.problem"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *__all__])
+__getattr__, __dir__ = lazy_names(__name__, globals(), dict.fromkeys(__all__, "problem"))

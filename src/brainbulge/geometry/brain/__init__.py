@@ -10,8 +10,7 @@ Pipeline::
     phi, grad = mesh.skull("left").signed_distance(points_mm)
 """
 
-import importlib
-from typing import Any
+from brainbulge.lazy import lazy_names
 
 #: public name -> submodule; loaded on first use (PEP 562), so that importing a light
 #: submodule (e.g. ``defaults`` for the CLI's parser) does not pull in scipy.ndimage and the
@@ -43,13 +42,4 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_WHERE])
+__getattr__, __dir__ = lazy_names(__name__, globals(), _WHERE)
