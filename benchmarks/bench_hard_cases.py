@@ -24,12 +24,24 @@ beta 60. Formulations compared for sliding contact (``--variants``):
   segment contact (:mod:`edge_contact`), so that the edge cannot cut into the tissue
   between two nodes; ``edge-smooth`` against the boundary with interpolated vertex normals
   (C1), ``edge-hermite`` against cubic Hermite segments through the vertices (C1
-  positions, closest-point projection). No rezoning, no hotspot relaxation.
+  positions, closest-point projection), ``edge-vertex`` as ``edge-smooth`` with the gap
+  near a boundary vertex blended into that vertex's normal gap (``--blend``: the parameter
+  distance, default ``VertexEdgeContact.blend``). No rezoning, no hotspot relaxation.
+- ``edge-offset`` / ``edge-vertex-offset``: ``edge-smooth`` / ``edge-vertex`` on a mesh
+  whose opening break points sit half a corner element inside the opening
+  (:func:`offset_mesh`), so that no boundary vertex starts at the skull's edge (the held /
+  free split goes by the points' angles, not by the boundary labels, so it is unchanged).
+
+``--tolerance`` sets Newton's tolerance for the variants (default 1e-9, the product's). A
+variant's row (``--one``) also gives the edge points' smallest gap at the end, the
+parameter ``xi`` of their projections on their segments, and the solution's asymmetry: the
+largest difference of ``u_y`` between mirrored vertices, relative to the largest ``|u|``
+(``asymmetry_far``: outside the edge-exclusion disks around the edges).
 
 3D (``--3d``): the six craniectomy scenarios on the demo's brain (``brainbulge study
 craniectomy --tets 30000``: Netgen gives 21k tets).
 
-Rerun with ``python benchmarks/bench_hard_cases.py`` (about 20 min on 2 cores; add ``--3d``
+Rerun with ``python benchmarks/bench_hard_cases.py`` (about 25 min on 2 cores; add ``--3d``
 for the six brain scenarios, about 2 min more). Each row runs in its own process.
 """
 
@@ -52,7 +64,10 @@ CASES_2D = {
     "a80b60": (80.0, 60.0),
 }
 VARIANTS = ("production", "released", "released-per-solve", "released-opening", "edge",
-            "edge-smooth", "edge-hermite")
+            "edge-smooth", "edge-hermite", "edge-offset", "edge-vertex", "edge-vertex-offset")
+#: how far the ``-offset`` meshes move the opening's break points into the opening, in
+#: corner element sizes: half an element, so that the edge point starts mid-segment
+OFFSET_CORNERS = 0.5
 
 
 # --- the skull region S and its signed distance ---------------------------------------
@@ -101,6 +116,19 @@ def in_cone(R: float, beta_deg: float, center_deg: float, x: np.ndarray,
     return np.abs(np.arctan2(yr, xr)) < math.radians(beta_deg) / 2 + margin
 
 
+def offset_mesh(case):
+    """The case's mesh with the opening's break points (and their refinement) moved into the
+    opening by :data:`OFFSET_CORNERS` corner element sizes, so that no boundary vertex lies
+    at the skull's edge angle (an ``ngs.Mesh``). The opening's label then starts inside the
+    opening; the held/free split of the sliding variants goes by angle, not by label."""
+    import dataclasses
+
+    shift = math.degrees(OFFSET_CORNERS * case.corner_h / case.R)
+    geo = dataclasses.replace(case.geometry, beta_deg=case.beta - 2 * shift)
+    return geo.mesh(case.mesh_size * case.R, case.corner_h, case.rim_h,
+                    case.edge_exclusion * case.R)
+
+
 def edge_points(R: float, beta_deg: float, center_deg: float) -> np.ndarray:
     """The skull's two sharp edges (2, 2) [length]."""
     th = math.radians(center_deg) + np.array([-1.0, 1.0]) * math.radians(beta_deg) / 2
@@ -122,9 +150,12 @@ def run_2d_production(alpha: float, beta: float, contact: str) -> dict:
             "top_uy": s.get("max_vertical_displacement")}
 
 
-def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dict:
+def run_2d_variant(alpha: float, beta: float, contact: str, variant: str,
+                   tolerance: float = 1e-9, blend: float | None = None) -> dict:
     """A formulation of :data:`VARIANTS` other than production, in this process (it
-    replaces the point contacts' gap evaluation)."""
+    replaces the point contacts' gap evaluation); ``tolerance``: Newton's, on the scaled
+    residual; ``blend``: the ``edge-vertex`` variants' (default
+    ``VertexEdgeContact.blend``)."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
     from brainbulge.model.problem import Contact
     from brainbulge.solver import ramp
@@ -170,18 +201,22 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dic
     points.PointContact.update = update
     points.PointContact.hessian = hessian
     ramp.check_feasible = lambda solver: None  # the opening's points are off S at rest
-    problem = hemidisk_problem(case)
+    problem = hemidisk_problem(case, offset_mesh(case) if variant.endswith("offset") else None)
     if variant == "released-opening":
         problem.contacts = [Contact("skull|opening", arc)]
     form = MixedForm(problem, element=case.element)
     edges = variant.startswith("edge")
     if edges:
-        from edge_contact import EdgeContact, HermiteEdgeContact, SmoothEdgeContact
+        from edge_contact import EdgeContact, SmoothEdgeContact, VertexEdgeContact
+        from hermite_edge_contact import HermiteEdgeContact
 
-        kind = {"edge-smooth": SmoothEdgeContact,
+        kind = {"edge-smooth": SmoothEdgeContact, "edge-offset": SmoothEdgeContact,
+                "edge-vertex": VertexEdgeContact, "edge-vertex-offset": VertexEdgeContact,
                 "edge-hermite": HermiteEdgeContact}.get(variant, EdgeContact)
         form.point_contacts.append(kind(form, "skull|opening", edge_points(*geo)))
-    solver = NewtonSolver(form, SolverOptions(steps=case.steps))
+        if blend is not None and kind is VertexEdgeContact:
+            form.point_contacts[-1].blend = blend
+    solver = NewtonSolver(form, SolverOptions(steps=case.steps, tolerance=tolerance))
     if edges:
         solver.relaxation = None  # its local problems know vertex contact points only
         solver.contact.moving[-1][:] = True
@@ -214,10 +249,35 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dic
         sol.converged = ok
     wall = time.perf_counter() - t0
     mesh = form.mesh
-    uy = max(form.u(mesh(*v.point))[1] for v in mesh.vertices)
-    return {"converged": sol.converged, "load": sol.load, "newton": sol.newton_iterations,
-            "rejected": sol.rejected_steps, "rezones": 0, "wall_s": wall, "solve_s": wall,
-            "top_uy": float(uy), "outer": outer}
+    X = np.array([v.point for v in mesh.vertices])
+    u = np.array([form.u(mesh(*p)) for p in X])
+    uy = u[:, 1].max()
+    # symmetry about the opening's axis (x = 0 for the centred opening): u_y at mirrored
+    # vertices (those a corner element inside the circle, whose mirror images lie in the
+    # mesh), relative to the largest |u|
+    inner = X[np.hypot(X[:, 0], X[:, 1]) < case.R - case.corner_h]
+    du = [abs(form.u(mesh(*p))[1] - form.u(mesh(-p[0], p[1]))[1]) for p in inner]
+    asym = float(max(du) / np.linalg.norm(u, axis=1).max())
+    asym_at = [float(v) for v in inner[int(np.argmax(du))]]
+    far = np.min([np.linalg.norm(inner - e, axis=1) for e in edge_points(*geo)], axis=0)
+    asym_far = float(max(np.compress(far > case.edge_exclusion * case.R, du))
+                     / np.linalg.norm(u, axis=1).max())
+    row = {"converged": sol.converged, "load": sol.load, "newton": sol.newton_iterations,
+           "rejected": sol.rejected_steps, "rezones": 0, "wall_s": wall, "solve_s": wall,
+           "top_uy": float(uy), "outer": outer, "asymmetry": asym, "asymmetry_far": asym_far,
+           "asymmetry_at": asym_at}
+    if sol.failure_site is not None:  # where the failed solve's force residual peaks
+        row["failure_site"] = [float(v) for v in sol.failure_site]  # deformed [length]
+    if edges:  # the edge points' smallest gap to the deformed tissue (< 0: inside it)
+        edge = form.point_contacts[-1]
+        edge.update(form.gfu.vec.FV().NumPy())
+        row["edge_gap"] = float(edge.g.min())
+        if hasattr(edge, "_quad"):  # where on its segment each edge point projects
+            from edge_contact import _projection
+
+            row["edge_xi"] = [_projection(C, edge.pos[edge._quad(int(s))].ravel())
+                              for C, s in zip(edge.C, edge.seg, strict=True)]
+    return row
 
 
 def run_3d(out: Path) -> list[dict]:
@@ -244,11 +304,16 @@ def main() -> None:
     ap.add_argument("--contacts", nargs="+", default=["sliding", "noslip"])
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     ap.add_argument("--3d", dest="three_d", action="store_true", help="the six 3D scenarios")
+    ap.add_argument("--tolerance", type=float, default=1e-9,
+                    help="Newton's tolerance on the scaled residual (the variants)")
+    ap.add_argument("--blend", type=float, default=None,
+                    help="the edge-vertex variants' blend (parameter distance from a vertex)")
     ap.add_argument("--one", nargs=4, help=argparse.SUPPRESS)  # ALPHA BETA CONTACT VARIANT
     args = ap.parse_args()
     if args.one:
         alpha, beta, contact, variant = args.one
-        print(json.dumps(run_2d_variant(float(alpha), float(beta), contact, variant)))
+        print(json.dumps(run_2d_variant(float(alpha), float(beta), contact, variant,
+                                        args.tolerance, args.blend)))
         return
     print("| case | contact | formulation | converged | load | Newton | rejected | rezones "
           "| solve s | max u_y |")
@@ -264,7 +329,9 @@ def main() -> None:
                 else:
                     done = subprocess.run(
                         [sys.executable, __file__, "--one", str(alpha), str(beta), contact,
-                         variant], capture_output=True, text=True)
+                         variant, "--tolerance", str(args.tolerance)]
+                        + ([] if args.blend is None else ["--blend", str(args.blend)]),
+                        capture_output=True, text=True)
                     lines = done.stdout.strip().splitlines()
                     if done.returncode or not lines:
                         print(f"| {name} | {contact} | {variant} | error: "

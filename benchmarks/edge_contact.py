@@ -17,6 +17,15 @@ the force ``-A lambda grad g`` on the segment's two nodes (``A``: the mesh size,
 ``g`` is the larger of its two segments' values at a convex vertex and the smaller at a
 concave one (tissue wrapped around the edge). The object offers what the product's
 ``ActiveSet`` uses of a ``PointContact``.
+
+:class:`SmoothEdgeContact` measures the gap along interpolated vertex normals (a C1
+boundary), with its exact gradient by forward-mode differentiation (:class:`_Dual`, implicit
+in the projection). Its gradient still jumps where the edge point passes a vertex (the
+projection's derivative differs on the vertex's two segments); :class:`VertexEdgeContact`
+turns the gap, within a parameter distance ``blend`` of a vertex ``v``, smoothly into the
+vertex gap ``(C - x_v) . N_v`` (the edge point against the tangent line at ``v``), so that
+the gradient is the same from both segments. Cubic Hermite segments:
+:mod:`hermite_edge_contact`.
 """
 
 from __future__ import annotations
@@ -298,9 +307,10 @@ def _normalized(v):
     return [v[0] / n, v[1] / n]
 
 
-def _gap_terms(C, z, xi):
-    """``f = (C - x(xi)) x n(xi)`` (zero at the projection) and ``g = (C - x) . n / |n|``
-    for positions ``z`` (8 values or duals) and ``xi``."""
+def _vertex_normals(z):
+    """Unit normals ``N_a``, ``N_b`` at the ends of ``a -> b`` of ``z = (p, a, b, q)``, each
+    the normalized sum of its two segments' right unit normals (the segment's own at an
+    end of the boundary)."""
     p, a, b, q = z[0:2], z[2:4], z[4:6], z[6:8]
 
     def rn(u, w):  # right unit normal of u -> w
@@ -311,11 +321,29 @@ def _gap_terms(C, z, xi):
     end_b = float(_val(q[0])) == float(_val(b[0])) and float(_val(q[1])) == float(_val(b[1]))
     Na = n_ab if end_a else _normalized([m + k for m, k in zip(rn(p, a), n_ab, strict=True)])
     Nb = n_ab if end_b else _normalized([m + k for m, k in zip(n_ab, rn(b, q), strict=True)])
+    return Na, Nb
+
+
+def _gap_terms(C, z, xi, blend: float = 0.0):
+    """``f = (C - x(xi)) x n(xi)`` (zero at the projection) and ``g = (C - x) . n / |n|``
+    for positions ``z`` (8 values or duals) and ``xi``; with ``blend > 0``, ``g`` turns
+    smoothly into the vertex gap ``(C - x_v) . N_v`` within ``blend`` of a vertex ``v``
+    (parameter distance; weight ``s(t) = 3 t^2 - 2 t^3``, ``t`` = distance / ``blend``)."""
+    a, b = z[2:4], z[4:6]
+    Na, Nb = _vertex_normals(z)
     x = [a[i] + xi * (b[i] - a[i]) for i in range(2)]
     w = [C[i] - x[i] for i in range(2)]
     n = [(1 - xi) * Na[i] + xi * Nb[i] for i in range(2)]
     f = w[0] * n[1] - w[1] * n[0]
     g = (w[0] * n[0] + w[1] * n[1]) / _sqrt(n[0] * n[0] + n[1] * n[1])
+    if blend > 0:
+        near_a = _val(xi) < 0.5
+        if min(_val(xi), 1 - _val(xi)) < blend:
+            v, N = (a, Na) if near_a else (b, Nb)
+            t = (xi if near_a else 1 - xi) / blend
+            s = t * t * (3 - 2 * t)
+            g_v = (C[0] - v[0]) * N[0] + (C[1] - v[1]) * N[1]
+            g = s * g + (1 - s) * g_v
     return f, g
 
 
@@ -340,16 +368,18 @@ def _projection(C: np.ndarray, z: np.ndarray) -> float | None:
     return 0.5 * (lo + hi)
 
 
-def smooth_gap(C: np.ndarray, z: np.ndarray) -> float | None:
+def smooth_gap(C: np.ndarray, z: np.ndarray, blend: float = 0.0) -> float | None:
     """Gap of ``C`` along the boundary's interpolated normal on the segment ``a -> b``,
     ``z = (p, a, b, q)`` (8,) with ``p``, ``q`` the neighbouring vertices: vertex normals
     ``N_a``, ``N_b`` averaged from the adjacent segments, ``n(xi) = (1 - xi) N_a + xi N_b``,
-    and ``xi`` where ``C - x(xi)`` is parallel to ``n(xi)``. None when no ``xi`` in [0, 1]."""
+    and ``xi`` where ``C - x(xi)`` is parallel to ``n(xi)``. None when no ``xi`` in [0, 1].
+    ``blend``: the vertex gap near the vertices (:func:`_gap_terms`)."""
     xi = _projection(C, z)
-    return None if xi is None else float(_gap_terms(C, z, xi)[1])
+    return None if xi is None else float(_gap_terms(C, z, xi, blend)[1])
 
 
-def smooth_gap_gradient(C: np.ndarray, z: np.ndarray) -> np.ndarray | None:
+def smooth_gap_gradient(C: np.ndarray, z: np.ndarray, blend: float = 0.0
+                        ) -> np.ndarray | None:
     """Exact ``d g / d z`` (8,) of :func:`smooth_gap` (implicit in ``xi``: ``dg/dz = g_z -
     g_xi f_z / f_xi``), or None when ``C`` does not project onto the segment."""
     xi = _projection(C, z)
@@ -357,7 +387,7 @@ def smooth_gap_gradient(C: np.ndarray, z: np.ndarray) -> np.ndarray | None:
         return None
     eye = np.eye(9)
     zd = [_Dual(float(z[i]), eye[i]) for i in range(8)]
-    f, g = _gap_terms(C, zd, _Dual(xi, eye[8]))
+    f, g = _gap_terms(C, zd, _Dual(xi, eye[8]), blend)
     if FROZEN_PROJECTION:
         return g.d[:8]
     return g.d[:8] - g.d[8] * f.d[:8] / f.d[8]
@@ -366,6 +396,10 @@ def smooth_gap_gradient(C: np.ndarray, z: np.ndarray) -> np.ndarray | None:
 class SmoothEdgeContact(EdgeContact):
     """:class:`EdgeContact` against a C1 boundary (:func:`smooth_gap`): the gap and its
     normal do not jump when the edge point passes a vertex of the tissue's boundary."""
+
+    #: parameter distance from a vertex within which the gap turns into the vertex gap
+    #: (:func:`_gap_terms`); 0: none
+    blend = 0.0
 
     def __init__(self, form, boundary: str, points: np.ndarray) -> None:
         super().__init__(form, boundary, points)
@@ -385,14 +419,14 @@ class SmoothEdgeContact(EdgeContact):
             near = np.argsort(np.linalg.norm(mids - C, axis=1))[:8]
             best = None
             for s in near:
-                g = smooth_gap(C, self.pos[self._quad(int(s))].ravel())
+                g = smooth_gap(C, self.pos[self._quad(int(s))].ravel(), self.blend)
                 if g is not None and (best is None or abs(g) < abs(best[0])):
                     best = (g, int(s))
             if best is not None:
                 self.g[k], self.seg[k] = best
 
     def _grad_at(self, k: int, z: np.ndarray) -> np.ndarray:
-        grad = smooth_gap_gradient(self.C[k], z)
+        grad = smooth_gap_gradient(self.C[k], z, self.blend)
         return np.zeros(8) if grad is None else grad
 
     def _local(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -412,98 +446,11 @@ class SmoothEdgeContact(EdgeContact):
         return 0.5 * (H + H.T)
 
 
-def _hermite(z, xi):
-    """Point and tangent of the cubic Hermite segment ``a -> b`` of ``z = (p, a, b, q)``
-    whose end tangents are perpendicular to the averaged vertex normals (a C1 boundary
-    through the vertices), with length ``|b - a|``."""
-    p, a, b, q = z[0:2], z[2:4], z[4:6], z[6:8]
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    L = _sqrt(dx * dx + dy * dy)
+class VertexEdgeContact(SmoothEdgeContact):
+    """:class:`SmoothEdgeContact` whose gap, within ``blend`` (parameter distance) of a
+    boundary vertex ``v``, turns smoothly into the vertex gap ``(C - x_v) . N_v`` (the edge
+    point against the tangent line at ``v``): the gap's gradient is then the same from the
+    two segments that share ``v``, where the interpolated normal's projection makes it
+    jump."""
 
-    def tangent(u, w):  # unit direction u -> w
-        ex, ey = w[0] - u[0], w[1] - u[1]
-        n = _sqrt(ex * ex + ey * ey)
-        return [ex / n, ey / n]
-
-    t_ab = tangent(a, b)
-    end_a = float(_val(p[0])) == float(_val(a[0])) and float(_val(p[1])) == float(_val(a[1]))
-    end_b = float(_val(q[0])) == float(_val(b[0])) and float(_val(q[1])) == float(_val(b[1]))
-    Ta = t_ab if end_a else _normalized([m + k for m, k in zip(tangent(p, a), t_ab, strict=True)])
-    Tb = t_ab if end_b else _normalized([m + k for m, k in zip(t_ab, tangent(b, q), strict=True)])
-    h00, h10 = 2 * xi**3 - 3 * xi**2 + 1, xi**3 - 2 * xi**2 + xi
-    h01, h11 = -2 * xi**3 + 3 * xi**2, xi**3 - xi**2
-    d00, d10 = 6 * xi**2 - 6 * xi, 3 * xi**2 - 4 * xi + 1
-    d01, d11 = -6 * xi**2 + 6 * xi, 3 * xi**2 - 2 * xi
-    x = [h00 * a[i] + h10 * L * Ta[i] + h01 * b[i] + h11 * L * Tb[i] for i in range(2)]
-    t = [d00 * a[i] + d10 * L * Ta[i] + d01 * b[i] + d11 * L * Tb[i] for i in range(2)]
-    return x, t
-
-
-def _hermite_gap(C, z, xi):
-    """``(C - x(xi)) . n(xi)``, ``n`` the curve's right unit normal (outward)."""
-    x, t = _hermite(z, xi)
-    n = _normalized([t[1], -t[0]])
-    return (C[0] - x[0]) * n[0] + (C[1] - x[1]) * n[1]
-
-
-def hermite_closest(C: np.ndarray, z: np.ndarray) -> tuple[float, float]:
-    """``(distance, xi)`` of the point of the Hermite segment closest to ``C``."""
-    xs = np.linspace(0.0, 1.0, 9)
-    d = [np.hypot(*(C - np.array(_hermite(z, s)[0]))) for s in xs]
-    k = int(np.argmin(d))
-    lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, 8)]
-    phi = (np.sqrt(5) - 1) / 2
-    for _ in range(50):  # golden section on the squared distance
-        m1, m2 = hi - phi * (hi - lo), lo + phi * (hi - lo)
-        f1 = np.sum((C - np.array(_hermite(z, m1)[0])) ** 2)
-        f2 = np.sum((C - np.array(_hermite(z, m2)[0])) ** 2)
-        if f1 < f2:
-            hi = m2
-        else:
-            lo = m1
-    xi = 0.5 * (lo + hi)
-    return float(np.hypot(*(C - np.array(_hermite(z, xi)[0])))), xi
-
-
-class HermiteEdgeContact(SmoothEdgeContact):
-    """:class:`EdgeContact` against a C1 boundary of cubic Hermite segments through the mesh
-    vertices, by closest-point projection: the gap's gradient with respect to the nodes is
-    the partial derivative at the fixed projection (exact, as the projection is stationary)
-    and continuous where the projection passes a vertex."""
-
-    def update(self, x: np.ndarray) -> None:
-        EdgeContact.update(self, x)
-        if not hasattr(self, "next_of"):
-            return
-        mids = 0.5 * (self.pos[self.segments[:, 0]] + self.pos[self.segments[:, 1]])
-        self.xi_h = np.zeros(self.n_points)
-        for k, C in enumerate(self.C):
-            best = None
-            for s in np.argsort(np.linalg.norm(mids - C, axis=1))[:8]:
-                z = self.pos[self._quad(int(s))].ravel()
-                dist, xi = hermite_closest(C, z)
-                if best is None or dist < best[0]:
-                    best = (dist, int(s), xi)
-            _, s, xi = best
-            self.seg[k], self.xi_h[k] = s, xi
-            self.g[k] = float(_hermite_gap(C, self.pos[self._quad(s)].ravel(), xi))
-
-    def _grad_at(self, k: int, z: np.ndarray, xi: float | None = None) -> np.ndarray:
-        eye = np.eye(8)
-        zd = [_Dual(float(z[i]), eye[i]) for i in range(8)]
-        xi = float(self.xi_h[k]) if xi is None else xi
-        return _hermite_gap(self.C[k], zd, xi).d
-
-    def _hessian(self, k: int) -> np.ndarray:
-        """Central differences of the gradient, the projection solved again at each side
-        (so that its motion along the curve counts)."""
-        z = self.pos[self._quad(int(self.seg[k]))].ravel()
-        delta = 1e-6 * float(np.linalg.norm(z[4:6] - z[2:4]))
-        H = np.empty((8, 8))
-        for j in range(8):
-            e = np.zeros(8)
-            e[j] = delta
-            gp = self._grad_at(k, z + e, hermite_closest(self.C[k], z + e)[1])
-            gm = self._grad_at(k, z - e, hermite_closest(self.C[k], z - e)[1])
-            H[:, j] = (gp - gm) / (2 * delta)
-        return 0.5 * (H + H.T)
+    blend = 0.2

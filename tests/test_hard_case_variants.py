@@ -69,3 +69,71 @@ def test_smooth_gap_gradient_is_exact_and_the_gap_continuous_across_a_vertex():
         assert found, angle
         gaps.append(found[0])
     assert np.max(np.abs(np.diff(gaps))) < 2e-4
+
+
+def _full_gradients(C, nodes, blend):
+    """The gap's gradient over all five ``nodes`` from each segment ``C`` projects onto."""
+    out = []
+    for first in (0, 1):
+        z = nodes[first:first + 4].ravel()
+        grad = smooth_gap_gradient(C, z, blend)
+        if grad is not None:
+            full = np.zeros(10)
+            full[2 * first:2 * first + 8] = grad
+            out.append(full)
+    return out
+
+
+def test_vertex_blend_makes_the_gap_gradient_continuous_over_a_vertex():
+    """Within ``blend`` of a vertex the gap turns into the vertex gap ``(C - x_v) . N_v``:
+    its exact gradient matches central differences, and for points swept over the vertex
+    the gradient with respect to all nodes varies continuously, where without the blend it
+    jumps between the vertex's two segments."""
+    nodes = np.array([[0.2, 0.97], [0.4, 0.98], [0.6, 0.95], [0.8, 0.88], [1.0, 0.75]])
+    z = nodes[0:4].ravel()
+    C = np.array([0.59, 0.955])  # near the vertex (0.6, 0.95), inside the blend
+    grad = smooth_gap_gradient(C, z, 0.2)
+    fd = np.array([(smooth_gap(C, z + e, 0.2) - smooth_gap(C, z - e, 0.2)) / 2e-6
+                   for e in np.eye(8) * 1e-6])
+    np.testing.assert_allclose(grad, fd, atol=1e-8)
+    jumps = {}
+    for blend in (0.0, 0.2):
+        grads = []
+        for dx in np.linspace(-0.004, 0.004, 41):
+            found = _full_gradients(nodes[2] + np.array([dx, 0.01]), nodes, blend)
+            assert found, dx
+            grads.append(found[0])
+        jumps[blend] = np.max(np.linalg.norm(np.diff(grads, axis=0), axis=1))
+    assert jumps[0.0] > 0.1  # the unblended gradient jumps at the vertex
+    assert jumps[0.2] < 0.02  # steps of 2e-4 in position: a continuous gradient
+
+
+def test_offset_mesh_has_no_vertex_at_the_edge_and_the_edge_starts_outside_the_tissue():
+    """The ``-offset`` meshes move the opening's break points half a corner element into the
+    opening: the default mesh has a boundary vertex at each skull edge, the offset one none
+    within a third of a corner element, and each edge point starts outside the tissue (its
+    gap to the C1 boundary at rest is positive: the chord of the segment under it lies
+    inside the circle)."""
+    import ngsolve as ngs
+
+    from bench_hard_cases import edge_points, offset_mesh
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.solver.mixed import MixedForm
+    from edge_contact import SmoothEdgeContact
+
+    case = HemidiskCase(alpha=80.0, beta=60.0, contact="sliding")
+    edges = edge_points(case.R, case.beta, case.opening_center)
+
+    def nearest(mesh):
+        names = mesh.GetBoundaries()
+        on = {v.nr for el in mesh.Elements(ngs.BND) if names[el.index] in ("skull", "opening")
+              for v in el.vertices}
+        X = np.array([mesh.vertices[v].point for v in sorted(on)])
+        return min(np.linalg.norm(X - e, axis=1).min() for e in edges)
+
+    assert nearest(case.mesh()) < 1e-9
+    mesh = offset_mesh(case)
+    assert nearest(mesh) > case.corner_h / 3
+    form = MixedForm(hemidisk_problem(case, mesh), element=case.element)
+    edge = SmoothEdgeContact(form, "skull|opening", edges)
+    assert np.all(edge.g > 0)
