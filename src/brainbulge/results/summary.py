@@ -32,19 +32,8 @@ import numpy as np
 from brainbulge.results.fields import output_fields, sample
 from brainbulge.results.quadrature import QuadraturePoints, quadrature_points
 from brainbulge.results.recovery import recovered_gradient
+from brainbulge.results.schema import EXTREMES, PERCENTILES
 from brainbulge.solver.options import Solution
-
-#: summary key stem -> (field name, extreme kinds)
-EXTREMES = {
-    "radial_stretch": ("lambda_n", ("max", "min")),
-    "tangential_stretch": ("lambda_t", ("max", "min")),
-    "principal_strain": ("max_principal_strain", ("max",)),
-}
-
-
-#: volume percentiles reported per extreme kind: ``p95_*``, ``p99_*`` for maxima and ``p05_*``,
-#: ``p01_*`` for minima
-PERCENTILES = {"max": (95, 99), "min": (5, 1)}
 
 
 def away_from(X: np.ndarray, points: list[tuple[float, ...]], radius: float) -> np.ndarray:
