@@ -294,11 +294,15 @@ def test_stale_names_are_found() -> None:
 # --- the tables of summary.json keys: the declarations of results/schema.py ---------------
 
 OUTPUTS = DOCS / "outputs.md"
-#: the line before each key table of docs/outputs.md -> the cases whose keys it lists
+#: the line before each key table of docs/outputs.md -> the table (of the keys written by
+#: those cases)
 KEY_TABLES = {
-    "Both kinds of run:": schema.BOTH,
-    "Hemidisk only:": frozenset({schema.HEMIDISK}),
-    "Brain only (lengths mm, volumes ml, areas cm²):": frozenset({schema.BRAIN}),
+    "Both kinds of run:": schema.markdown_table(schema.BOTH),
+    "Hemidisk only:": schema.markdown_table(frozenset({schema.HEMIDISK})),
+    "Brain only (lengths mm, volumes ml, areas cm²):": schema.markdown_table(
+        frozenset({schema.BRAIN})),
+    "element's values at its vertices, averaged over the elements sharing a vertex):":
+        schema.markdown_table(schema.BOTH, schema.FIELDS, "field"),
 }
 
 
@@ -316,20 +320,20 @@ def key_tables(text: str) -> dict[str, tuple[int, int]]:
 def written_key_tables(text: str) -> str:
     """``text`` (docs/outputs.md) with its key tables made the schema's."""
     for intro, (a, b) in sorted(key_tables(text).items(), key=lambda kv: -kv[1][0]):
-        text = text[:a] + schema.markdown_table(KEY_TABLES[intro]) + "\n" + text[b:]
+        text = text[:a] + KEY_TABLES[intro] + "\n" + text[b:]
     return text
 
 
 def test_summary_key_tables_are_the_schemas() -> None:
-    """Every key, unit and meaning of the tables is declared in ``results/schema.py``,
-    and every declared key is in a table."""
+    """Every key and field, unit and meaning of the tables is declared in
+    ``results/schema.py``, and every declared one is in a table."""
     text = OUTPUTS.read_text(encoding="utf-8")
     for intro, (a, b) in key_tables(text).items():
-        assert text[a:b].rstrip("\n") == schema.markdown_table(KEY_TABLES[intro]), (
+        assert text[a:b].rstrip("\n") == KEY_TABLES[intro], (
             f"outputs.md, the table after {intro!r}, is not the schema's: run "
             "`python tests/test_docs.py` to write it")
-    assert set().union(*KEY_TABLES.values()) == schema.BOTH
-    assert {k.cases for k in schema.KEYS} <= set(KEY_TABLES.values())
+    assert {k.cases for k in schema.KEYS} == {schema.BOTH, *(frozenset({c}) for c in schema.BOTH)}
+    assert {k.cases for k in schema.FIELDS} == {schema.BOTH}
 
 
 def test_a_changed_key_table_is_seen() -> None:

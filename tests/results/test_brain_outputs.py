@@ -154,6 +154,11 @@ def test_a_brain_run_writes_the_declared_keys(toy_run) -> None:
     assert not undeclared, f"keys written but not declared in results/schema.py: {undeclared}"
     assert not missing, f"keys declared for every brain run but not written: {missing}"
     assert set(schema.argmaxes(schema.CSF)) <= set(on_disk)  # declared when there is CSF
+    from output_files import written_fields
+
+    in_npz, point, cell = written_fields(run)
+    assert in_npz == point == schema.field_names()
+    assert cell == schema.field_names(cell=True)
     line = schema.printout(on_disk, ("swelling_reached", "midline_shift_mm",
                                      "bulge_volume_ml"), schema.BRAIN)
     assert line == (f"Js = {s['swelling_reached']:.3f}, midline shift = "

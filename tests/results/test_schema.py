@@ -15,6 +15,7 @@ from brainbulge.results import schema
 from brainbulge.results.craniectomy_report import COMPARISON
 from brainbulge.results.extreme_sites import SITE_KEYS
 from brainbulge.results.report import BRAIN_REPORT_KEYS, REPORT_KEYS
+from output_files import written_fields
 
 
 def test_each_key_is_declared_once_with_unit_and_meaning() -> None:
@@ -58,11 +59,11 @@ def hemidisk_run(tmp_path_factory) -> tuple[dict, str]:
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
         assert main(["hemidisk", "--mesh-size", "0.2", "--steps", "2", "--out", str(out)]) == 0
-    return json.loads((out / "summary.json").read_text()), printed.getvalue()
+    return json.loads((out / "summary.json").read_text()), printed.getvalue(), out
 
 
 def test_a_hemidisk_run_writes_the_declared_keys(hemidisk_run) -> None:
-    summary, _ = hemidisk_run
+    summary, _, _ = hemidisk_run
     undeclared, missing = schema.check(summary, schema.HEMIDISK)
     assert not undeclared, f"keys written but not declared in results/schema.py: {undeclared}"
     assert not missing, f"keys declared for every hemidisk run but not written: {missing}"
@@ -70,7 +71,7 @@ def test_a_hemidisk_run_writes_the_declared_keys(hemidisk_run) -> None:
 
 
 def test_the_printout_gives_declared_keys_with_their_units(hemidisk_run) -> None:
-    summary, printed = hemidisk_run
+    summary, printed, _ = hemidisk_run
     line = printed.strip().splitlines()[-1]
     got = {k.strip(): v for k, v in re.findall(r"([^,=]+) = ([^ ,]+)", line)}
     assert list(got) == ["max |u|", "max lambda_n", "min lambda_n", "max lambda_t",
@@ -81,3 +82,11 @@ def test_the_printout_gives_declared_keys_with_their_units(hemidisk_run) -> None
     assert float(got["max lambda_t"]) == pytest.approx(summary["max_tangential_stretch"],
                                                        abs=1e-4)
     assert f"max |u| = {summary['max_displacement']:.4g} R" in line  # the hemidisk's unit
+
+
+def test_a_hemidisk_run_writes_the_declared_fields(hemidisk_run) -> None:
+    """``fields.npz`` and ``fields.vtu`` have the declared fields (the contact fields as
+    point data only; ``region`` as cell data)."""
+    in_npz, point, cell = written_fields(hemidisk_run[2])
+    assert in_npz == point == schema.field_names()
+    assert cell == schema.field_names(cell=True)

@@ -153,7 +153,7 @@ KEYS: tuple[Key, ...] = (
        "the opening boundary, the only part in contact)", labels=("penetration",),
        fmt=".2g"),
     _k("max_contact_pressure", "kPa", "largest skull contact pressure",
-       when="only with contact (sliding hemidisk, brain)"),
+       when="only with contact (brain; hemidisk: sliding, or no-slip on the `rigid` skull)"),
     _k("message", "", "why the solver stopped", when="only when not converged"),
     _k("failure_site", "length", "the deformed position of the vertex with the largest "
        "unbalanced force in the last Newton attempt; the message names it too, and the "
@@ -279,6 +279,26 @@ KEYS: tuple[Key, ...] = (
        "source's \"up to\" values with both ([paper.md](paper.md))", cases=_B),
 )
 
+#: the vertex fields of ``fields.vtu`` and ``fields.npz`` (``point_<field>``), written by
+#: both cases; ``fields.vtu`` has the element averages of those not in :data:`POINT_ONLY` as
+#: cell data, with ``region``
+FIELDS: tuple[Key, ...] = (
+    _k("u", "length", "displacement (3 components; z = 0 in 2D)"),
+    _k("u_magnitude", "length", "\\|u\\|"),
+    _k("u_vertical", "length", "u_y (2D) or u_z (3D)"),
+    _k(("lambda_n", "lambda_t", "max_principal_strain"), "-", "as above"),
+    _k(("J", "Je", "Js"), "-", "as above"),
+    _k("pressure", "kPa", "as above"),
+    _k("contact_pressure", "kPa", "skull contact pressure at the vertex: the force per "
+       "reference area of the exact nodal multiplier of the active set, lambda \\|grad g\\| "
+       "(0 everywhere in a run without contact)"),
+    _k("contact_status", "", "1 on the contact boundary and touching the skull, 0 on it but "
+       "separated, −1 elsewhere (interior, base, 3D flap; everywhere in a run without "
+       "contact)"),
+)
+#: the fields that ``fields.vtu`` has as point data only
+POINT_ONLY = ("contact_pressure", "contact_status")
+
 #: key name -> its declaration
 BY_NAME: dict[str, Key] = {n: k for k in KEYS for n in k.names}
 
@@ -286,6 +306,13 @@ BY_NAME: dict[str, Key] = {n: k for k in KEYS for n in k.names}
 def declared(case: str, always: bool = False) -> set[str]:
     """The keys that runs of ``case`` write; with ``always``, those written by every run."""
     return {n for k in KEYS if case in k.cases and not (always and k.when) for n in k.names}
+
+
+def field_names(cell: bool = False) -> set[str]:
+    """The fields of ``fields.vtu``'s point data (``fields.npz``: ``point_<field>``); with
+    ``cell``, those of its cell data."""
+    return ({n for k in FIELDS for n in k.names} - (set(POINT_ONLY) if cell else set())
+            | ({"region"} if cell else set()))
 
 
 def check(summary: dict[str, Any], case: str) -> tuple[list[str], list[str]]:
@@ -330,11 +357,12 @@ def printout(summary: dict[str, Any], names: tuple[str, ...], case: str) -> str:
     return ", ".join(parts)
 
 
-def markdown_table(cases: frozenset[str]) -> str:
-    """The docs table (``| key | unit | meaning |``) of the keys written by exactly
-    ``cases``."""
-    lines = ["| key | unit | meaning |", "|---|---|---|"]
-    for k in KEYS:
+def markdown_table(cases: frozenset[str], keys: tuple[Key, ...] = KEYS,
+                   head: str = "key") -> str:
+    """The docs table (``| key | unit | meaning |``) of the ``keys`` (:data:`KEYS` or
+    :data:`FIELDS`) written by exactly ``cases``."""
+    lines = [f"| {head} | unit | meaning |", "|---|---|---|"]
+    for k in keys:
         if k.cases != cases:
             continue
         shown = k.shown or ", ".join(f"`{n}`" for n in k.names)
