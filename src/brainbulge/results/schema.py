@@ -1,14 +1,17 @@
-"""The keys of ``summary.json``, declared once: name, unit, meaning and the runs that write them.
+"""The outputs of a run, declared once: the keys of ``summary.json`` and the fields of
+``fields.vtu``/``fields.npz``, each with its unit, meaning and the runs that write it.
 
-:data:`KEYS` is the one list: each :class:`Key` is one row of the key tables of
-docs/outputs.md (:func:`markdown_table` writes them; a test checks the page against it), with
-the keys it names, their unit, what they mean, the cases that write them (``hemidisk``, the 2D
-runs of :mod:`brainbulge.studies.hemidisk`, and ``brain``, the 3D runs of
-:mod:`brainbulge.studies.craniectomy`) and, for a key not in every run, when it is written.
-The writers take the stretch and strain families (:data:`EXTREMES`, :data:`PERCENTILES`) and
-the deprecated aliases (:func:`deprecated_aliases`) from here, the study reports their labels
-and units (:func:`label`, :func:`unit`) and the command line its printout
-(:func:`printout`). :func:`check` lists a summary's undeclared and missing keys.
+:data:`KEYS` lists the keys, :data:`FIELDS` the fields: each :class:`Key` is one row of the
+tables of docs/outputs.md (:func:`markdown_table` writes them; ``tests/test_docs.py`` checks
+the page against it), with the names it covers, their unit, what they mean, the cases that
+write them (``hemidisk``, the 2D runs of :mod:`brainbulge.studies.hemidisk`, and ``brain``,
+the 3D runs of :mod:`brainbulge.studies.craniectomy`) and, for a key not in every run, when
+it is written. The writers name the stretch and strain families by :func:`stem_key` of
+:data:`EXTREMES` and :data:`PERCENTILES`, the extremes with sites by :data:`SITES`, and take
+the deprecated aliases from :func:`deprecated_aliases`; the study reports take their labels
+and units (:func:`label`, :func:`unit`), the command line its printout (:func:`printout`).
+:func:`check` lists a summary's undeclared and missing keys (the tests run a hemidisk and a
+brain through it).
 
 Units: ``length`` is the case's length unit (:data:`LENGTH_UNIT`: the hemidisk's radius R,
 the brain's mm), ``-`` dimensionless, an empty unit a name, flag, count or table.
@@ -42,30 +45,38 @@ FIELD_LABELS = {"lambda_n": "lambda_n", "lambda_t": "lambda_t",
                 "max_principal_strain": "principal strain"}
 
 
+def stem_key(measure: str, stem: str, prefix: str = "") -> str:
+    """The key of ``measure`` (``max``, ``min``, ``raw_max``, ``raw_min``, ``argmax``,
+    ``p95``, ..., ``peak``) of the :data:`EXTREMES` stem ``stem``, e.g. ``raw_max_csf_
+    radial_stretch`` (``prefix`` before the stem: ``csf_`` for the CSF)."""
+    return f"{measure}_{prefix}{stem}"
+
+
 def extremes(prefix: str = "") -> tuple[str, ...]:
-    """``max_*``/``min_*`` of :data:`EXTREMES` (``prefix`` before the stem, e.g. ``csf_``)."""
-    return tuple(f"{k}_{prefix}{s}" for s, (_, kinds) in EXTREMES.items() for k in kinds)
+    """``max_*``/``min_*`` of :data:`EXTREMES`."""
+    return tuple(stem_key(k, s, prefix) for s, (_, kinds) in EXTREMES.items() for k in kinds)
 
 
 def raws(prefix: str = "") -> tuple[str, ...]:
     """``raw_max_*``/``raw_min_*``: the extremes over all points."""
-    return tuple(f"raw_{k}" for k in extremes(prefix))
+    return tuple(stem_key(f"raw_{k}", s, prefix) for s, (_, kinds) in EXTREMES.items()
+                 for k in kinds)
 
 
 def argmaxes(prefix: str = "") -> tuple[str, ...]:
     """``argmax_*``: where the maxima are."""
-    return tuple(f"argmax_{prefix}{s}" for s in EXTREMES)
+    return tuple(stem_key("argmax", s, prefix) for s in EXTREMES)
 
 
 def percentiles(prefix: str = "") -> tuple[str, ...]:
     """``pXX_*``: the volume percentiles of :data:`PERCENTILES`."""
-    return tuple(f"p{q:02d}_{prefix}{s}" for s, (_, kinds) in EXTREMES.items()
+    return tuple(stem_key(f"p{q:02d}", s, prefix) for s, (_, kinds) in EXTREMES.items()
                  for k in kinds for q in PERCENTILES[k])
 
 
 def peaks(prefix: str = "") -> tuple[str, ...]:
     """``peak_*``: the values exceeded in a small volume, of the maxima."""
-    return tuple(f"peak_{prefix}{s}" for s in EXTREMES)
+    return tuple(stem_key("peak", s, prefix) for s in EXTREMES)
 
 
 @dataclass(frozen=True)
