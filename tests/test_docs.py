@@ -11,6 +11,9 @@
 - Code names in backticks in the pages and in the CLI's help texts (Python files such as
   ``solver/linear/amg.py``, dotted names such as ``results.summary.exceeded_in``, UPPER_CASE
   constants) name files, modules, attributes and constants that exist.
+- The tables of ``summary.json`` keys in docs/outputs.md are the declarations of
+  ``results/schema.py`` (:func:`brainbulge.results.schema.markdown_table`): the same keys,
+  units and meanings. ``python tests/test_docs.py`` writes them into the page.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import pytest
 
 from brainbulge.cli import build_parser
 from brainbulge.geometry.brain.labels import read_label_map
+from brainbulge.results import schema
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -285,3 +289,62 @@ def test_stale_names_are_found() -> None:
         "results.summary.exceeded_at",
         "benchmarks/bench_nothing.py",
     }
+
+
+# --- the tables of summary.json keys: the declarations of results/schema.py ---------------
+
+OUTPUTS = DOCS / "outputs.md"
+#: the line before each key table of docs/outputs.md -> the table (of the keys written by
+#: those cases)
+KEY_TABLES = {
+    "Both kinds of run:": schema.markdown_table(schema.BOTH),
+    "Hemidisk only:": schema.markdown_table(frozenset({schema.HEMIDISK})),
+    "Brain only (lengths mm, volumes ml, areas cm²):": schema.markdown_table(
+        frozenset({schema.BRAIN})),
+    "element's values at its vertices, averaged over the elements sharing a vertex):":
+        schema.markdown_table(schema.BOTH, schema.FIELDS, "field"),
+}
+
+
+def key_tables(text: str) -> dict[str, tuple[int, int]]:
+    """``(start, end)`` character offsets in ``text`` of the table after each line of
+    ``KEY_TABLES`` (its ``|`` lines, after one blank line)."""
+    out = {}
+    for intro in KEY_TABLES:
+        m = re.search(rf"^{re.escape(intro)}\n\n((?:\|.*\n)+)", text, re.M)
+        assert m, f"outputs.md has no table after {intro!r}"
+        out[intro] = m.span(1)
+    return out
+
+
+def written_key_tables(text: str) -> str:
+    """``text`` (docs/outputs.md) with its key tables made the schema's."""
+    for intro, (a, b) in sorted(key_tables(text).items(), key=lambda kv: -kv[1][0]):
+        text = text[:a] + KEY_TABLES[intro] + "\n" + text[b:]
+    return text
+
+
+def test_summary_key_tables_are_the_schemas() -> None:
+    """Every key and field, unit and meaning of the tables is declared in
+    ``results/schema.py``, and every declared one is in a table."""
+    text = OUTPUTS.read_text(encoding="utf-8")
+    for intro, (a, b) in key_tables(text).items():
+        assert text[a:b].rstrip("\n") == KEY_TABLES[intro], (
+            f"outputs.md, the table after {intro!r}, is not the schema's: run "
+            "`python tests/test_docs.py` to write it")
+    assert {k.cases for k in schema.KEYS} == {schema.BOTH, *(frozenset({c}) for c in schema.BOTH)}
+    assert {k.cases for k in schema.FIELDS} == {schema.BOTH}
+
+
+def test_a_changed_key_table_is_seen() -> None:
+    """The check above sees a unit and a meaning that differ from the declarations."""
+    text = OUTPUTS.read_text(encoding="utf-8")
+    for old, new in (("| `bulge_volume_ml` | ml |", "| `bulge_volume_ml` | mm³ |"),
+                     ("largest \\|u\\|", "largest u")):
+        assert old in text
+        changed = text.replace(old, new, 1)
+        assert written_key_tables(changed) == text != changed
+
+
+if __name__ == "__main__":
+    OUTPUTS.write_text(written_key_tables(OUTPUTS.read_text(encoding="utf-8")), encoding="utf-8")

@@ -142,6 +142,30 @@ def test_midline_and_stress_keys_of_a_solved_brain(toy_run) -> None:
     assert on_disk["midline_shift_mm"] == pytest.approx(s["midline_shift_mm"])
 
 
+def test_a_brain_run_writes_the_declared_keys(toy_run) -> None:
+    """``summary.json`` of a 3D run has exactly the keys ``results/schema.py`` declares for
+    the brain (the toy has CSF: its ventricle), and the printout's keys among them."""
+    from brainbulge.results import schema
+
+    s, run = toy_run
+    on_disk = json.loads((run / "summary.json").read_text())
+    assert set(on_disk) == set(s)
+    undeclared, missing = schema.check(on_disk, schema.BRAIN)
+    assert not undeclared, f"keys written but not declared in results/schema.py: {undeclared}"
+    assert not missing, f"keys declared for every brain run but not written: {missing}"
+    assert set(schema.argmaxes(schema.CSF)) <= set(on_disk)  # declared when there is CSF
+    from output_files import written_fields
+
+    in_npz, point, cell = written_fields(run)
+    assert in_npz == point == schema.field_names()
+    assert cell == schema.field_names(cell=True)
+    line = schema.printout(on_disk, ("swelling_reached", "midline_shift_mm",
+                                     "bulge_volume_ml"), schema.BRAIN)
+    assert line == (f"Js = {s['swelling_reached']:.3f}, midline shift = "
+                    f"{s['midline_shift_mm']:+.3g} mm, bulge volume = "
+                    f"{s['bulge_volume_ml']:.3g} ml")
+
+
 def test_old_keys_are_aliases_for_one_release(toy_run) -> None:
     s, _ = toy_run
     for old, new in (("midline_shift_monro_mm", "midline_shift_mm"),

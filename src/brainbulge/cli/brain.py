@@ -143,6 +143,7 @@ def run_command(args: argparse.Namespace) -> int:
 def run_case(args: argparse.Namespace, case: Any) -> int:
     from brainbulge.model.brain import SOLVER_FIELDS
     from brainbulge.model.problem import case_tables
+    from brainbulge.results.schema import BRAIN, printout
     from brainbulge.studies.craniectomy import run_brain
 
     config = {"command": "brain", **case_tables(case, SOLVER_FIELDS)}
@@ -151,11 +152,7 @@ def run_case(args: argparse.Namespace, case: Any) -> int:
     out = start_run(args, config, resume=resume)
     s = run_brain(case, out, progress=progress_bar())
     finish_run(out)
-    print(
-        f"Js {s['swelling_reached']:.3f}: max |u| = {s['max_displacement']:.3g} mm, midline "
-        f"shift {s['midline_shift_mm']:+.3g} mm, bulge {s['bulge_volume_ml']:.3g} ml, max "
-        f"principal strain {s['max_principal_strain']:.3g}, penetration "
-        f"{s['max_penetration_mm']:.2g} mm"
-    )
+    print(printout(s, ("swelling_reached", "max_displacement", "midline_shift_mm",
+                       "bulge_volume_ml", "max_principal_strain", "max_penetration_mm"), BRAIN))
     return 0
 

@@ -37,17 +37,12 @@ def run_command(args: argparse.Namespace) -> int:
 def run_case(args: argparse.Namespace, case: Any) -> int:
     from brainbulge.model.hemidisk import SOLVER_FIELDS
     from brainbulge.model.problem import case_tables
+    from brainbulge.results.schema import HEMIDISK, extremes, printout
     from brainbulge.studies.hemidisk import run_hemidisk
 
     config = {"command": "hemidisk", **case_tables(case, SOLVER_FIELDS)}
     out = start_run(args, config)
     summary = run_hemidisk(case, out, progress=progress_bar())
     finish_run(out)
-    print(
-        f"max |u| = {summary['max_displacement']:.4g} R, lambda_n in "
-        f"[{summary['min_radial_stretch']:.4f}, {summary['max_radial_stretch']:.4f}], "
-        f"lambda_t in [{summary['min_tangential_stretch']:.4f}, "
-        f"{summary['max_tangential_stretch']:.4f}], penetration "
-        f"{summary['max_penetration']:.2g} R"
-    )
+    print(printout(summary, ("max_displacement", *extremes()[:4], "max_penetration"), HEMIDISK))
     return 0

@@ -21,7 +21,8 @@ Every key says what its value is (lengths mm, volumes ml, stresses kPa):
 - ``max_hydrostatic_stress_kpa`` / ``min_hydrostatic_stress_kpa``: its extremes (all tissue).
 
 Keys of earlier releases stay one release as aliases (:data:`DEPRECATED_ALIASES`), listed in
-the summary under ``deprecated_keys``.
+the summary under ``deprecated_keys``; they are declared with the others in
+:mod:`brainbulge.results.schema`.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from brainbulge.results import schema
 from brainbulge.results.brain_metrics import (
     MonroLocation,
     locate_monro,
@@ -45,18 +47,11 @@ if TYPE_CHECKING:
 log = logging.getLogger("brainbulge")
 
 #: old key -> the key that now holds its value (kept one release)
-DEPRECATED_ALIASES = {
-    "midline_shift_monro_mm": "midline_shift_mm",
-    "max_pressure_kpa": "max_hydrostatic_stress_kpa",
-    "min_pressure_kpa": "min_hydrostatic_stress_kpa",
-}
-#: old keys whose value is derived: ``max_abs_J_minus_Js`` / ``raw_max_abs_J_minus_Js``
+DEPRECATED_ALIASES = schema.deprecated_aliases()
+#: old keys whose value is their own: ``max_abs_J_minus_Js`` / ``raw_max_abs_J_minus_Js``
 #: (the summary's single-point maxima of ``|J - Js|``) are superseded by the ``*_abs_Je_minus_1``
 #: statistics
-DEPRECATED_DERIVED = {
-    "max_abs_J_minus_Js": "p95_abs_Je_minus_1",
-    "raw_max_abs_J_minus_Js": "raw_max_abs_Je_minus_1",
-}
+DEPRECATED_DERIVED = schema.deprecated_derived()
 
 
 def brain_outputs(

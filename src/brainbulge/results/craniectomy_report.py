@@ -6,20 +6,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from brainbulge.results import schema
 from brainbulge.results.html_report import views_marker, write_report_html
 from brainbulge.results.run_record import atomic_output, atomic_write_text
 from brainbulge.results.views3d import write_study_surfaces
 
-#: summary keys of the comparison table and figure (label, unit)
-COMPARISON = {
-    "midline_shift_mm": ("midline shift", "mm"),
-    "bulge_volume_ml": ("bulge volume", "ml"),
-    "max_displacement": ("max |u|", "mm"),
-    "max_principal_strain": ("max principal strain", "-"),
-    "max_radial_stretch": ("max lambda_n", "-"),
-    "max_tangential_stretch": ("max lambda_t", "-"),
-    "mean_hydrostatic_stress_kpa": ("mean hydrostatic stress", "kPa"),
-}
+#: summary keys of the comparison table and figure -> (label, unit), declared in
+#: :mod:`brainbulge.results.schema`
+COMPARISON = {key: (schema.label(key), schema.unit(key, schema.BRAIN)) for key in (
+    "midline_shift_mm", "bulge_volume_ml", "max_displacement", "max_principal_strain",
+    "max_radial_stretch", "max_tangential_stretch", "mean_hydrostatic_stress_kpa")}
 
 
 def write_comparison(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> list[Path]:

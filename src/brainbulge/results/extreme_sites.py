@@ -43,14 +43,10 @@ from brainbulge.results.fields import (
     stretch_along,
     tangential_stretch,
 )
+from brainbulge.results.schema import EXTREMES, SITES
 
 #: (summary key, field, kind) of the extremes whose sites are reported
-SITE_KEYS = (
-    ("max_principal_strain", "max_principal_strain", "max"),
-    ("max_radial_stretch", "lambda_n", "max"),
-    ("min_radial_stretch", "lambda_n", "min"),
-    ("max_tangential_stretch", "lambda_t", "max"),
-)
+SITE_KEYS = tuple((key, EXTREMES[key[4:]][0], key[:3]) for key in SITES)
 
 
 @dataclass

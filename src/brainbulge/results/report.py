@@ -14,7 +14,7 @@ from typing import Any
 from brainbulge.results.html_report import views_marker, write_report_html
 from brainbulge.results.run_record import atomic_write_text
 
-#: the hemidisk columns of the demo's tables
+#: the hemidisk columns of the demo's tables (keys of :mod:`brainbulge.results.schema`)
 REPORT_KEYS = (
     "max_displacement",
     "max_radial_stretch",
@@ -26,6 +26,10 @@ REPORT_KEYS = (
     "newton_iterations",
     "wall_time_s",
 )
+#: the craniectomy columns of the demo's table
+BRAIN_REPORT_KEYS = ("midline_shift_mm", "bulge_volume_ml", "max_displacement",
+                     "max_principal_strain", "max_radial_stretch", "max_tangential_stretch",
+                     "max_penetration_mm", "newton_iterations", "wall_time_s")
 
 
 def _summary(folder: Path) -> dict[str, Any] | None:
@@ -83,11 +87,8 @@ def write_demo_report(
             views_marker("brain"),
             "",
         ]
-        keys = ("midline_shift_mm", "bulge_volume_ml", "max_displacement",
-                "max_principal_strain", "max_radial_stretch", "max_tangential_stretch",
-                "max_penetration_mm", "newton_iterations", "wall_time_s")
         rows = [(sc["name"], _summary(out / "brain" / sc["name"])) for sc in brain]
-        lines += _table(rows, keys)
+        lines += _table(rows, BRAIN_REPORT_KEYS)
         for sc in brain:
             if (out / "brain" / sc["name"] / "sections.png").is_file():
                 lines += ["", f"![{sc['name']}](brain/{sc['name']}/sections.png)"]

@@ -32,19 +32,8 @@ import numpy as np
 from brainbulge.results.fields import output_fields, sample
 from brainbulge.results.quadrature import QuadraturePoints, quadrature_points
 from brainbulge.results.recovery import recovered_gradient
+from brainbulge.results.schema import CSF, EXTREMES, PERCENTILES, stem_key
 from brainbulge.solver.options import Solution
-
-#: summary key stem -> (field name, extreme kinds)
-EXTREMES = {
-    "radial_stretch": ("lambda_n", ("max", "min")),
-    "tangential_stretch": ("lambda_t", ("max", "min")),
-    "principal_strain": ("max_principal_strain", ("max",)),
-}
-
-
-#: volume percentiles reported per extreme kind: ``p95_*``, ``p99_*`` for maxima and ``p05_*``,
-#: ``p01_*`` for minima
-PERCENTILES = {"max": (95, 99), "min": (5, 1)}
 
 
 def away_from(X: np.ndarray, points: list[tuple[float, ...]], radius: float) -> np.ndarray:
@@ -68,13 +57,13 @@ def field_extremes(
         for kind in kinds:
             f = np.argmax if kind == "max" else np.argmin
             i_raw = int(f(v))
-            out[f"raw_{kind}_{prefix}{stem}"] = float(v[i_raw])
+            out[stem_key(f"raw_{kind}", stem, prefix)] = float(v[i_raw])
             if keep.any():
                 idx = np.flatnonzero(keep)
                 i = int(idx[f(v[idx])])
-                out[f"{kind}_{prefix}{stem}"] = float(v[i])
+                out[stem_key(kind, stem, prefix)] = float(v[i])
                 if kind == "max":
-                    out[f"argmax_{prefix}{stem}"] = [float(c) for c in X[i]]
+                    out[stem_key("argmax", stem, prefix)] = [float(c) for c in X[i]]
     return out
 
 
@@ -157,9 +146,9 @@ def field_percentiles(
         for kind in kinds:
             qs = PERCENTILES[kind]
             for q, x in zip(qs, weighted_percentiles(v, w, qs), strict=True):
-                out[f"p{q:02d}_{prefix}{stem}"] = float(x)
+                out[stem_key(f"p{q:02d}", stem, prefix)] = float(x)
             if kind == "max" and peak_volume is not None:
-                out[f"peak_{prefix}{stem}"] = exceeded_in(v, w, peak_volume)
+                out[stem_key("peak", stem, prefix)] = exceeded_in(v, w, peak_volume)
     return out
 
 
@@ -309,7 +298,7 @@ def solution_summary(
             {r: 1.0 for r in set(form.mesh.GetMaterials()) if rx.match(r)}, default=0.0
         )
         in_tissue = q(mask_cf) > 0.5
-        for prefix, sel in (("", in_tissue), ("csf_", ~in_tissue)):
+        for prefix, sel in (("", in_tissue), (CSF, ~in_tissue)):
             if sel.any():
                 sub = {k: v[sel] for k, v in fields.items()}
                 out.update(field_extremes(X[sel], sub, keep[sel], prefix))
