@@ -106,7 +106,7 @@ BAD = [
     (["brain", "--skull-edge-radius", "nan"], "edge radius"),
     (["brain", "--steps", "5000"], "steps"),
     (["brain", "--tets", "100000000"], "tets"),
-    (["brain", "--swelling", "0"], "--help"),
+    (["brain", "--swelling", "0"], "swelling Js = 0.0 must be a number in [0.5, 2]"),
     # mesh inputs
     (["mesh", "--tets", "5000"], "below 25,000"),
     (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
