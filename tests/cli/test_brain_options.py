@@ -44,7 +44,7 @@ def test_the_help_shows_the_case_defaults_and_ranges(capsys) -> None:
 
 
 def test_every_field_is_an_option_or_internal(capsys) -> None:
-    flags = set(re.findall(r"[[|] ?(--[a-z-]+)", _help(capsys, "brain")))
+    flags = set(re.findall(r"(?:\[|\|) ?(--[a-z-]+)", _help(capsys, "brain")))
     expected = {f.metadata["flag"] or "--" + f.name.replace("_", "-")
                 for f in dataclasses.fields(CraniectomyCase) if f.name not in INTERNAL}
     assert expected <= flags

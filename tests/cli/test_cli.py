@@ -156,7 +156,7 @@ BAD = [
     (["plan", "--swell", "left", "--swelling", "3"], "[0.5, 2]"),
     (["plan", "--swell", "left", "--diameters", "0"], "[40, 200] mm"),
     (["plan", "--swell", "both", "--centres", "3"], "must be even with --swell both"),
-    (["plan", "--swell", "left", "--threshold", "-1"], "--threshold must be a positive"),
+    (["plan", "--swell", "left", "--threshold", "-1"], "--threshold = -1.0 must be a number"),
     (["plan", "--swell", "left", "--workers", "0"], "workers"),
 ]
 

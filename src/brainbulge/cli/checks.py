@@ -36,6 +36,8 @@ TEMPLATE_LABELLED_ML = 1883.0
 LABELS_TETS_PER_ML = (10_000 / TEMPLATE_LABELLED_ML, TEMPLATE_TETS_MIN / TEMPLATE_LABELLED_ML)
 #: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
 FLAP_CENTRE_MM = 150.0
+#: local Dask worker processes (``--workers``)
+WORKERS = (1, 256)
 #: Dask scheduler addresses: ``[protocol://]host:port``
 SCHEDULER = re.compile(r"((tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]*[A-Za-z0-9\]]:\d{1,5}")
 #: seconds a Dask scheduler has to accept a connection before a study is refused
@@ -226,6 +228,13 @@ _LABELLED_ML: dict[tuple[str, int, int, str], float] = {}
 
 
 # --------------------------------------------------------------------------- study
+
+
+def cluster(address: str | None, workers: int | None) -> None:
+    """``--scheduler`` (:func:`scheduler`) and ``--workers`` (None or within `WORKERS`)."""
+    if workers is not None:
+        number("--workers", workers, *WORKERS, integer=True)
+    scheduler(address)
 
 
 def scheduler(address: str | None) -> None:

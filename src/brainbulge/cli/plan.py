@@ -17,7 +17,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, require, start_run
+from brainbulge.cli import add_cluster_options, add_output_options, finish_run, require, start_run
 from brainbulge.cli.options import add_case_options, flag
 
 
@@ -52,10 +52,7 @@ def add_parser(sub: Any) -> None:
     where = p.add_mutually_exclusive_group()
     add_case_options(where, PlanOptions, DEFAULT_TEXT, names=("n_centres", "centres_mm"))
     add_case_options(p, PlanOptions, DEFAULT_TEXT, names=("diameters_mm", "strain_threshold"))
-    p.add_argument("--scheduler", default=None,
-                   help="address of a running Dask scheduler (default: a local cluster); "
-                   "'serial' runs in this process")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes")
+    add_cluster_options(p)
     add_output_options(p, "plan-out")
     p.set_defaults(func=run_command)
 
@@ -104,9 +101,7 @@ def run_command(args: argparse.Namespace) -> int:
         require(all(abs(v) <= checks.FLAP_CENTRE_MM for v in c),
                 f"--centre {' '.join(f'{v:g}' for v in c)} is not near the skull: give a "
                 f"point on it, each coordinate within +-{checks.FLAP_CENTRE_MM:g} mm (RAS)")
-    if args.workers is not None:
-        checks.number("--workers", args.workers, 1, 256, integer=True)
-    checks.scheduler(args.scheduler)
+    checks.cluster(args.scheduler, args.workers)
     common = common_config(args)
     checks.brain_case({**common, "flap": "none"})  # the flaps are checked on the mesh
     config = {"command": "plan", "plan": {

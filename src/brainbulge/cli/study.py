@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run
+from brainbulge.cli import add_cluster_options, add_output_options, finish_run, start_run
 from brainbulge.cli.options import add_case_options, field_default
 from brainbulge.errors import InputError, StudyIncomplete
 from brainbulge.studies.suites import STUDIES
@@ -23,13 +23,7 @@ CRANIECTOMY_OPTIONS = ("tets", "mesh", "swelling", "fix")
 def add_parser(sub: Any) -> None:
     p = sub.add_parser("study", help="run a sweep of scenarios (resumable)", description=__doc__)
     p.add_argument("name", choices=STUDIES)
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        help="address of a running Dask scheduler (default: a local cluster); "
-        "'serial' runs in this process",
-    )
-    p.add_argument("--workers", type=int, default=None, help="local worker processes")
+    add_cluster_options(p)
     from brainbulge.model.brain_case import CraniectomyCase
     from brainbulge.model.hemidisk import HemidiskCase
 
@@ -78,9 +72,7 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
 
-    if args.workers is not None and not 1 <= args.workers <= 256:
-        raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
-    checks.scheduler(args.scheduler)
+    checks.cluster(args.scheduler, args.workers)
     for option in ("alphas", "betas"):
         values = getattr(args, option) or []
         if len(set(values)) < len(values):
