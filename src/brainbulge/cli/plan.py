@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from brainbulge.cli import add_cluster_options, add_output_options, finish_run, require, start_run
-from brainbulge.cli.options import add_case_options, flag
+from brainbulge.cli.options import add_case_options, case_config, field_default, flag
 
 
 def _fields() -> dict[str, Any]:
@@ -58,17 +58,19 @@ def add_parser(sub: Any) -> None:
 
 
 def common_config(args: argparse.Namespace) -> dict[str, Any]:
-    """The options every plan shares (a :class:`CraniectomyCase` as a dict): those given,
-    and the planner's defaults (:data:`~brainbulge.studies.plan_options.CASE_DEFAULTS`)."""
+    """The options every plan shares (a :class:`CraniectomyCase` as a dict), each recorded:
+    those given, else the planner's defaults
+    (:data:`~brainbulge.studies.plan_options.CASE_DEFAULTS`), else the case's; the mesh, or
+    what it is built from."""
     from brainbulge.model.brain_case import CraniectomyCase
     from brainbulge.studies.plan_options import CASE_DEFAULTS, CASE_OPTIONS
 
-    config = {**CASE_DEFAULTS, **case_config(args, CraniectomyCase, CASE_OPTIONS)}
-    if "mesh" in config:
-        config.pop("tets")
-    elif "labels" in config:
-        config.setdefault("label_map", "synthseg")
-    return config
+    given = case_config(args, CraniectomyCase)  # the parser has CASE_OPTIONS of the case
+    source = ("mesh",) if "mesh" in given else ("tets", "labels", "label_map") if (
+        "labels" in given) else ("tets",)
+    return {k: given.get(k, CASE_DEFAULTS.get(k, field_default(CraniectomyCase, k)))
+            for k in CASE_OPTIONS if k not in ("mesh", "tets", "labels", "label_map")
+            or k in source}
 
 
 def plan_options(args: argparse.Namespace) -> Any:
@@ -77,14 +79,6 @@ def plan_options(args: argparse.Namespace) -> Any:
     from brainbulge.studies.plan_options import PlanOptions
 
     return PlanOptions(**case_config(args, PlanOptions))
-
-
-def case_config(args: argparse.Namespace, cls: type, names: tuple[str, ...] | None = None
-                ) -> dict[str, Any]:
-    """The options of ``cls`` given on the command line (of ``names`` if given)."""
-    from brainbulge.cli.options import case_config as given
-
-    return {k: v for k, v in given(args, cls).items() if names is None or k in names}
 
 
 def run_command(args: argparse.Namespace) -> int:
