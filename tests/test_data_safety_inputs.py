@@ -261,7 +261,7 @@ def test_run_files_of_studies_meshes_plans_and_the_demo_run(tmp_path, monkeypatc
     import brainbulge.cli.reproduce as reproduce
 
     monkeypatch.setattr(plan, "run_command", lambda args: seen.append(
-        (args.swell, args.diameters, args.centre, args.tets)) or 0)
+        (args.swell, args.diameters_mm, args.centres_mm, args.tets)) or 0)
     toml.write_text('command = "plan"\n[plan]\nswell = "left"\ntets = 30000\n'
                     "diameters_mm = [80.0, 100.0]\ncentres_mm = [[-60, 0, 50], [-50, 10, 60]]\n")
     assert main(["run", str(toml)]) == 0

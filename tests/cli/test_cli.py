@@ -106,7 +106,7 @@ BAD = [
     (["brain", "--skull-edge-radius", "nan"], "edge radius"),
     (["brain", "--steps", "5000"], "steps"),
     (["brain", "--tets", "100000000"], "tets"),
-    (["brain", "--swelling", "0"], "--help"),
+    (["brain", "--swelling", "0"], "swelling Js = 0.0 must be a number in [0.5, 2]"),
     # mesh inputs
     (["mesh", "--tets", "5000"], "below 25,000"),
     (["mesh", "--tets", "100000", "--refine", "2"], "--tets 100000 / 8^2 is below 25,000"),
@@ -156,7 +156,7 @@ BAD = [
     (["plan", "--swell", "left", "--swelling", "3"], "[0.5, 2]"),
     (["plan", "--swell", "left", "--diameters", "0"], "[40, 200] mm"),
     (["plan", "--swell", "both", "--centres", "3"], "must be even with --swell both"),
-    (["plan", "--swell", "left", "--threshold", "-1"], "--threshold must be a positive"),
+    (["plan", "--swell", "left", "--threshold", "-1"], "--threshold = -1.0 must be a number"),
     (["plan", "--swell", "left", "--workers", "0"], "workers"),
 ]
 

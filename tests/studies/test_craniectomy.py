@@ -320,8 +320,8 @@ def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_pat
         ({"coarse_tets": 5000, "element": "taylor-hood"}, "needs --element mini"),
         ({"coarse_mesh": "missing/brain.npz"}, "does not exist"),
         ({"coarse_tets": 5000, "coarse_mesh": "missing/brain.npz"}, "not both"),
-        ({"refine": 4}, "must be 0, 1, 2 or 3"),
-        ({"refine": 1.0}, "must be 0, 1, 2 or 3"),
+        ({"refine": 4}, r"refine = 4 must be a whole number in \[0, 3\]"),
+        ({"refine": 1.0}, r"refine = 1.0 must be a whole number in \[0, 3\]"),
     ],
 )
 def test_mesh_sequencing_inputs_are_checked(options, message) -> None:

@@ -289,7 +289,7 @@ def test_left_swelling_is_best_relieved_on_the_left_and_a_mirrored_flap_mirrors(
     (["--swell", "left", "--centres", "0"], "--centres"),
     (["--swell", "left", "--centre", "500", "0", "0"], "--centre 500 0 0"),
     (["--swell", "left", "--threshold", "2"], "--threshold"),
-    (["--swell", "left", "--skull-edge-radius", "20"], "edge radius 20"),
+    (["--swell", "left", "--skull-edge-radius", "20"], "edge radius = 20"),
     (["--swell", "left", "--mesh", "missing/brain.npz"], "does not exist"),
     (["--swell", "left", "--label-map", "m.json"], "--labels"),
     (["--swell", "left", "--scheduler", "not a url"], "scheduler"),

@@ -387,6 +387,18 @@ def add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
     )
 
 
+def add_cluster_options(p: argparse.ArgumentParser, what: str = "",
+                        workers_note: str = "") -> None:
+    """``--scheduler`` and ``--workers`` (checked by :func:`brainbulge.cli.checks.cluster`);
+    ``what``: the runs they apply to, as a prefix of the help."""
+    prefix = f"{what}: " if what else ""
+    p.add_argument("--scheduler", default=None,
+                   help=f"{prefix}address of a running Dask scheduler (default: a local "
+                   "cluster); 'serial' runs in this process")
+    p.add_argument("--workers", type=whole_number("--workers"), default=None,
+                   help=f"{prefix}local worker processes{workers_note}")
+
+
 def require(cond: bool, message: str) -> None:
     """Refuse the command with ``message`` (one line, exit 2) unless ``cond`` holds."""
     if not cond:

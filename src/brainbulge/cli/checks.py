@@ -18,14 +18,11 @@ from pathlib import Path
 from typing import Any, Union
 
 from brainbulge.errors import InputError
+from brainbulge.model.brain_case import TETS_RANGE
 from brainbulge.model.options import number
 
 log = logging.getLogger(__name__)
 
-#: initial load steps
-STEPS = (1, 1000)
-#: tets of a brain mesh: more than 5 million need more memory than a workstation has
-MESH_TETS = (1_000, 5_000_000)
 #: the coarsest mesh Netgen makes of the ICBM152 template: below ~25,000 target tets it
 #: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
 #: finish in 5 minutes)
@@ -39,6 +36,8 @@ TEMPLATE_LABELLED_ML = 1883.0
 LABELS_TETS_PER_ML = (10_000 / TEMPLATE_LABELLED_ML, TEMPLATE_TETS_MIN / TEMPLATE_LABELLED_ML)
 #: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
 FLAP_CENTRE_MM = 150.0
+#: local Dask worker processes (``--workers``)
+WORKERS = (1, 256)
 #: Dask scheduler addresses: ``[protocol://]host:port``
 SCHEDULER = re.compile(r"((tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]*[A-Za-z0-9\]]:\d{1,5}")
 #: seconds a Dask scheduler has to accept a connection before a study is refused
@@ -157,12 +156,11 @@ def flap_centre(centre: Any) -> None:
 
 def brain_case(config: dict[str, Any]) -> Any:
     """A checked :class:`~brainbulge.model.brain.CraniectomyCase` from a plain dict."""
-    from brainbulge.model.brain import CraniectomyCase
+    from brainbulge.model.brain_case import CraniectomyCase
     from brainbulge.studies.craniectomy import case_from_dict
 
     check_types(CraniectomyCase, {k: v for k, v in config.items() if k != "name"}, "brain")
-    case = case_from_dict(config)
-    number("steps", case.steps, *STEPS, integer=True)
+    case = case_from_dict(config)  # the case checks its own ranges
     flap_centre(case.flap_centre_mm)
     if case.fibres is not None:
         from brainbulge.geometry.brain.fibres import check_fibres
@@ -193,8 +191,8 @@ def mesh_tets(tets: Any, refine: Any, template: bool, labelled_ml: float | None 
             f"{made} is below {TEMPLATE_TETS_MIN:,}: Netgen cannot mesh the ICBM152 template "
             f"that coarse (it retries for minutes); give --tets {TEMPLATE_TETS_MIN * 8**refine} "
             "or more")
-    lo = TEMPLATE_TETS_MIN * 8**refine if template else MESH_TETS[0]  # the range that holds
-    number("--tets", tets, min(lo, MESH_TETS[1]), MESH_TETS[1], integer=True)
+    lo = TEMPLATE_TETS_MIN * 8**refine if template else TETS_RANGE[0]  # the range that holds
+    number("--tets", tets, min(lo, TETS_RANGE[1]), TETS_RANGE[1], integer=True)
     if labelled_ml is None:
         return
     least, safe = (math.ceil(rate * labelled_ml) * 8**refine for rate in LABELS_TETS_PER_ML)
@@ -230,6 +228,13 @@ _LABELLED_ML: dict[tuple[str, int, int, str], float] = {}
 
 
 # --------------------------------------------------------------------------- study
+
+
+def cluster(address: str | None, workers: int | None) -> None:
+    """``--scheduler`` (:func:`scheduler`) and ``--workers`` (None or within `WORKERS`)."""
+    if workers is not None:
+        number("--workers", workers, *WORKERS, integer=True)
+    scheduler(address)
 
 
 def scheduler(address: str | None) -> None:

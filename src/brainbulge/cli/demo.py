@@ -13,8 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run
-from brainbulge.errors import InputError
+from brainbulge.cli import add_cluster_options, add_output_options, finish_run, start_run
 
 
 def add_parser(sub: Any) -> None:
@@ -22,8 +21,7 @@ def add_parser(sub: Any) -> None:
         "demo", help="reproduce the paper in miniature and write a report", description=__doc__
     )
     p.add_argument("--quick", action="store_true", help="coarse meshes, fewer scenarios")
-    p.add_argument("--scheduler", default=None, help="Dask scheduler address or 'serial'")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes")
+    add_cluster_options(p)
     add_output_options(p, "brainbulge-demo")
     p.set_defaults(func=run_command)
 
@@ -39,9 +37,7 @@ def run_command(args: argparse.Namespace) -> int:
         run_named_study,
     )
 
-    checks.scheduler(args.scheduler)
-    if args.workers is not None and not 1 <= args.workers <= 256:
-        raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
+    checks.cluster(args.scheduler, args.workers)
     plan = demo_plan(args.quick)
     out = start_run(args, {"command": "demo", "quick": args.quick, **plan})
     parts = demo_scenarios(plan)

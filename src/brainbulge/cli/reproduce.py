@@ -23,7 +23,7 @@ import contextlib
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run
+from brainbulge.cli import add_cluster_options, add_output_options, finish_run, start_run
 from brainbulge.errors import StudyIncomplete
 from brainbulge.geometry.brain.defaults import FIXATIONS, LARGE_TETS
 from brainbulge.results.run_record import atomic_write_json
@@ -37,12 +37,14 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--tets", type=int, default=PAPER_TETS,
                    help=f"3D brain mesh size in tets (default {PAPER_TETS}: ~1.4M)")
-    p.add_argument("--fix", choices=FIXATIONS, default="inferior+superior",
+    from brainbulge.model.brain_case import CraniectomyCase
+    from brainbulge.model.hemidisk import HemidiskCase
+
+    p.add_argument("--fix", choices=FIXATIONS, default=CraniectomyCase.fix,
                    help="fixed part of the brain's outer surface (3D)")
-    p.add_argument("--mesh-size", type=float, default=0.05, help="2D element size [R]")
-    p.add_argument("--scheduler", default=None, help="Dask scheduler address or 'serial'")
-    p.add_argument("--workers", type=int, default=None,
-                   help="local worker processes (3D part: 1 from 400k tets on)")
+    p.add_argument("--mesh-size", type=float, default=HemidiskCase.mesh_size,
+                   help="2D element size [R]")
+    add_cluster_options(p, workers_note=f" (3D part: 1 from {LARGE_TETS:,} tets on)")
     add_output_options(p, "brainbulge-reproduce")
     p.set_defaults(func=run_command)
 
@@ -52,7 +54,7 @@ def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
     from brainbulge.cli import checks
     from brainbulge.studies.suites import paper_parts
 
-    checks.scheduler(args.scheduler)
+    checks.cluster(args.scheduler, getattr(args, "workers", None))
     return paper_parts(args.tets, args.fix, args.mesh_size)
 
 

@@ -29,7 +29,7 @@ import io
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options
+from brainbulge.cli import add_cluster_options, add_output_options
 from brainbulge.errors import InputError
 
 #: the commands a run file can describe
@@ -42,11 +42,7 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser("run", help="run any command described by a TOML file (a run.toml)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config", type=Path, help="TOML file (e.g. a previous run.toml)")
-    p.add_argument("--scheduler", default=None,
-                   help="studies, plans, the demo: address of a running Dask scheduler "
-                   "(default: a local cluster); 'serial' runs in this process")
-    p.add_argument("--workers", type=int, default=None,
-                   help="studies, plans, the demo: local worker processes")
+    add_cluster_options(p, "studies, plans, the demo")
     add_output_options(p, "run-out")
     p.set_defaults(func=run_command)
 
@@ -104,10 +100,10 @@ def run_command(args: argparse.Namespace) -> int:
     check_keys(config, schema(command, config), str(args.config))
     from brainbulge.cli import checks
 
-    if args.workers is not None:
-        checks.number("--workers", args.workers, 1, 256, integer=True)
     if command == "study":  # the other commands check --scheduler themselves
-        checks.scheduler(args.scheduler)
+        checks.cluster(args.scheduler, args.workers)
+    elif args.workers is not None:
+        checks.number("--workers", args.workers, *checks.WORKERS, integer=True)
     if command in ("hemidisk", "brain"):
         from brainbulge.model.problem import case_options
 

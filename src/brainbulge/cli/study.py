@@ -9,38 +9,31 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from brainbulge.cli import add_output_options, finish_run, start_run, whole_number
-from brainbulge.cli.options import add_case_options
+from brainbulge.cli import add_cluster_options, add_output_options, finish_run, start_run
+from brainbulge.cli.options import add_case_options, field_default
 from brainbulge.errors import InputError, StudyIncomplete
 from brainbulge.studies.suites import STUDIES
 
 #: the hemidisk case's options a hemidisk study takes from the command line
 HEMIDISK_OPTIONS = ("mesh_size", "corner_mesh_size", "rim_mesh_size", "skull")
+#: the brain case's options the craniectomy study takes from the command line
+CRANIECTOMY_OPTIONS = ("tets", "mesh", "swelling", "fix")
 
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser("study", help="run a sweep of scenarios (resumable)", description=__doc__)
     p.add_argument("name", choices=STUDIES)
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        help="address of a running Dask scheduler (default: a local cluster); "
-        "'serial' runs in this process",
-    )
-    p.add_argument("--workers", type=int, default=None, help="local worker processes")
+    add_cluster_options(p)
+    from brainbulge.model.brain_case import CraniectomyCase
     from brainbulge.model.hemidisk import HemidiskCase
 
+    add_case_options(p, HemidiskCase, names=("steps",), default_text={  # of every study
+        "steps": f"default {HemidiskCase.steps} for hemidisk, {CraniectomyCase.steps} for "
+        "craniectomy studies"})
     hemidisk = p.add_argument_group("hemidisk studies (options of the case)")
     add_case_options(hemidisk, HemidiskCase, names=HEMIDISK_OPTIONS)  # type: ignore[arg-type]
-    p.add_argument("--tets", type=whole_number("--tets"), default=30_000,
-                   help="brain mesh size in tets (craniectomy study)")
-    p.add_argument("--mesh", default=None, help="brain.npz to use (craniectomy study)")
-    p.add_argument("--swelling", type=float, default=1.1, help="white-matter Js (craniectomy)")
-    p.add_argument("--fix", choices=("inferior", "inferior+superior"),
-                   default="inferior+superior",
-                   help="fixed outer surface (craniectomy): the base, or the base and the "
-                   "superior midline band (the paper's Figure 6)")
-    p.add_argument("--steps", type=int, default=4, help="initial load steps per scenario")
+    brain = p.add_argument_group("craniectomy study (options of the case)")
+    add_case_options(brain, CraniectomyCase, names=CRANIECTOMY_OPTIONS)  # type: ignore[arg-type]
     p.add_argument(
         "--alphas", type=float, nargs="+", default=None, help="sector angles [deg] (sector study)"
     )
@@ -55,15 +48,16 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
     from brainbulge.studies import hemidisk as hd
 
     if name == "craniectomy":
+        from brainbulge.model.brain_case import CraniectomyCase
         from brainbulge.studies.craniectomy import craniectomy_scenarios
 
-        return craniectomy_scenarios(
-            tets=args.tets, mesh=args.mesh, swelling=args.swelling, steps=args.steps,
-            fix=args.fix,
-        )
+        return craniectomy_scenarios(**{  # each recorded in every scenario
+            key: getattr(args, key, field_default(CraniectomyCase, key))
+            for key in (*CRANIECTOMY_OPTIONS, "steps")})
     from brainbulge.model.hemidisk import HemidiskCase
 
-    common = {"mesh_size": HemidiskCase.mesh_size, "steps": args.steps,
+    common = {"mesh_size": HemidiskCase.mesh_size,
+              "steps": getattr(args, "steps", HemidiskCase.steps),
               "skull": HemidiskCase.skull}  # recorded in every scenario
     for key in HEMIDISK_OPTIONS:  # the others only when given: a rerun of an older study
         if hasattr(args, key):  # folder keeps its scenarios
@@ -78,9 +72,7 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
 
-    if args.workers is not None and not 1 <= args.workers <= 256:
-        raise InputError(f"--workers {args.workers} must be a whole number in [1, 256]")
-    checks.scheduler(args.scheduler)
+    checks.cluster(args.scheduler, args.workers)
     for option in ("alphas", "betas"):
         values = getattr(args, option) or []
         if len(set(values)) < len(values):

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from brainbulge.errors import InputError
+from brainbulge.model.brain_case import SWELLING_RANGE  # target Js, as for the brain
 from brainbulge.model.options import check_ranges, number, option, solver_fields
 
 if TYPE_CHECKING:  # loaded on use: the command line's parser reads the case without NGSolve
@@ -51,8 +52,6 @@ ELEMENTS = ("mini", "taylor-hood")
 #: Figure 4): the default of :attr:`HemidiskCase.swelling`
 SECTOR_SWELLING = 1.2
 DISK_SWELLING = 1.3
-#: target Js, as for the brain
-SWELLING_RANGE = (0.5, 2.0)
 #: element sizes [units of R]: 0.005 R makes ~150,000 triangles (P2: hours of Newton); a
 #: corner or rim size below 1e-4 R makes Netgen grade over 4 decades
 MESH_SIZE_RANGE = (0.005, 1.0)

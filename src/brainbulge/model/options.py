@@ -17,11 +17,12 @@ from brainbulge.errors import InputError
 
 def option(default: Any, help: str, *, unit: str = "", range: tuple[Any, Any] | None = None,
            label: str = "", hint: str = "", flag: str = "", choices: tuple[str, ...] = (),
-           metavar: tuple[str, ...] = (), solver: bool = False, internal: bool = False) -> Any:
+           metavar: tuple[str, ...] = (), solver: bool = False, internal: bool = False,
+           factory: Any = None) -> Any:
     """A dataclass field with its description.
 
     Args:
-        default: the value left out means.
+        default: the value left out means (ignored with ``factory``).
         help: what the option says (one phrase).
         unit: the unit shown after the range (``" R"``, ``" deg"``).
         range: ``(lo, hi)`` allowed, both included; a bound may be the name of another field
@@ -34,11 +35,14 @@ def option(default: Any, help: str, *, unit: str = "", range: tuple[Any, Any] | 
         solver: the option says how the case is solved (a run file's ``[solver]`` table),
             not what is simulated (``[case]``).
         internal: not a command-line option (set through a run file or the Python API).
+        factory: makes a mutable default (``dict``).
     """
-    return dataclasses.field(default=default, metadata={
-        "help": help, "unit": unit, "range": range, "label": label, "hint": hint,
-        "flag": flag, "choices": choices, "metavar": metavar, "solver": solver,
-        "internal": internal})
+    metadata = {"help": help, "unit": unit, "range": range, "label": label, "hint": hint,
+                "flag": flag, "choices": choices, "metavar": metavar, "solver": solver,
+                "internal": internal}
+    if factory is not None:
+        return dataclasses.field(default_factory=factory, metadata=metadata)
+    return dataclasses.field(default=default, metadata=metadata)
 
 
 def number(name: str, value: Any, lo: float, hi: float, unit: str = "",
@@ -66,13 +70,20 @@ def bounds(case: Any, f: dataclasses.Field) -> tuple[float, float]:
 
 
 def check_ranges(case: Any) -> None:
-    """Every field of ``case`` with a range and a value (``None`` is left out) lies in it."""
+    """Every field of ``case`` with a range and a value (``None`` is left out) lies in it;
+    of a list, every item."""
     for f in dataclasses.fields(case):
         value = getattr(case, f.name)
         if f.metadata.get("range") is None or value is None:
             continue
-        number(label(f), value, *bounds(case, f), f.metadata["unit"],
-               integer=f.type in (int, "int"), hint=f.metadata["hint"])
+        for item in value if isinstance(value, list | tuple) else [value]:
+            number(label(f), item, *bounds(case, f), f.metadata["unit"],
+                   integer=_integer(f.type), hint=f.metadata["hint"])
+
+
+def _integer(tp: Any) -> bool:
+    """A field of type ``int`` or ``int | None`` (also as the annotation's text)."""
+    return tp is int or str(tp).replace(" ", "") in ("int", "int|None", "None|int")
 
 
 def solver_fields(cls: type) -> tuple[str, ...]:

@@ -60,18 +60,21 @@ def brain_outputs(
     u_mm: np.ndarray,
     parenchyma: str,
     swell_sides: tuple[str, ...],
+    skull: Any = None,
 ) -> dict[str, Any]:
     """The midline, volume and stress keys of the module docstring.
 
     ``u_mm``: displacement at ``bm``'s nodes; ``parenchyma``: regex of the parenchyma's
-    region names; ``swell_sides``: the hemispheres whose white matter swells."""
+    region names; ``swell_sides``: the hemispheres whose white matter swells; ``skull``: the
+    run's rigid skull, if the caller has it (its envelope distance is the intact skull's)."""
     names = bm.material_names()
     rx = re.compile(f"^(?:{parenchyma})$")
     par_tets = np.array([bool(rx.match(str(n))) for n in names])
     par_nodes = np.zeros(len(bm.nodes_mm), dtype=bool)
     par_nodes[bm.tets[par_tets].ravel()] = True
     centroids = bm.nodes_mm[bm.tets].mean(axis=1)
-    depth = -bm.skull(None).envelope_distance(centroids, gradient=False)[0]
+    skull = skull if skull is not None else bm.skull(None)
+    depth = -skull.envelope_distance(centroids, gradient=False)[0]
     monro = locate_monro(bm.nodes_mm, bm.tets, np.char.startswith(names.astype(str), "csf"),
                          depth, bm.midsagittal)
     out: dict[str, Any] = {}

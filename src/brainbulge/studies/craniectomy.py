@@ -52,6 +52,7 @@ from brainbulge.model.brain import (
     CraniectomyCase,
     brain_mesh_for,
     brain_problem,
+    case_skull,
     coarse_brain_mesh_for,
     size_defaults,
 )
@@ -115,13 +116,15 @@ def run_brain(
 
 @dataclasses.dataclass
 class BrainRun:
-    """A solved 3D scenario: its case, mesh, form and solution; ``sequenced``: the
-    coarse stage of mesh sequencing (None without); ``started``: ``True`` when Newton
-    converged from a given start state (``solve_brain(start=...)``), ``False`` when it did
-    not and the load was ramped from ``Js = 1``, None without a start."""
+    """A solved 3D scenario: its case, mesh, rigid skull (the one of the run, made once),
+    form and solution; ``sequenced``: the coarse stage of mesh sequencing (None without);
+    ``started``: ``True`` when Newton converged from a given start state
+    (``solve_brain(start=...)``), ``False`` when it did not and the load was ramped from
+    ``Js = 1``, None without a start."""
 
     case: CraniectomyCase
     bm: BrainMesh
+    skull: Any
     form: MixedForm
     sol: Any
     sequenced: Any = None
@@ -146,7 +149,8 @@ def solve_brain(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     bm = brain_mesh if brain_mesh is not None else brain_mesh_for(case)
-    problem = brain_problem(bm, case)
+    skull = case_skull(bm, case)
+    problem = brain_problem(bm, case, skull)
     form = MixedForm(problem, element=case.element, compile_energy=case.compile)
     restart = out_dir / "restart.npz"
     inputs = {k: v for k, v in dataclasses.asdict(case).items()
@@ -191,7 +195,7 @@ def solve_brain(
         solver.release_linear_solver()
     if sol.converged:
         restart.unlink(missing_ok=True)
-    return BrainRun(case, bm, form, sol, sequenced, started)
+    return BrainRun(case, bm, skull, form, sol, sequenced, started)
 
 
 def write_brain_outputs(
@@ -209,7 +213,7 @@ def write_brain_outputs(
     fibres = _fibres(case, bm)
     G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for all
     points = point_fields(form, bm.envelope.centre_mm(), fibres, G)
-    summary = brain_summary(case, bm, sol, points)
+    summary = brain_summary(case, bm, sol, points, run.skull)
     summary["mesh_sequencing"] = (None if run.sequenced is None
                                   else dataclasses.asdict(run.sequenced))
     summary.update(extra or {})
@@ -268,12 +272,14 @@ def brain_summary(
     bm: BrainMesh,
     sol: Solution,
     points: PointFields | None = None,
+    skull: Any = None,
 ) -> dict[str, Any]:
     """``summary.json`` of a 3D scenario (see the module docstring); ``points``: the
     state's fields at the integration points (:func:`~brainbulge.results.summary.
-    point_fields`), if the caller has them (default: sampled here, radial axons)."""
+    point_fields`), if the caller has them (default: sampled here, radial axons);
+    ``skull``: the run's rigid skull (default: made here, :func:`case_skull`)."""
     form = sol.form
-    skull = bm.skull(case.flap, edge_radius_mm=case.edge_radius_mm)
+    skull = skull if skull is not None else case_skull(bm, case)
     flap = bm.flaps[case.flap]
     band = case.edge_exclusion_mm
 
@@ -302,7 +308,7 @@ def brain_summary(
     out["swelling_reached"] = sol.swelling_reached
     # vertex displacements
     u = _vertex_displacements(form, bm)
-    out.update(brain_outputs(bm, form, u, PARENCHYMA, SWELL_SIDES[case.swell]))
+    out.update(brain_outputs(bm, form, u, PARENCHYMA, SWELL_SIDES[case.swell], skull))
 
     def outside(x: np.ndarray) -> np.ndarray:
         return np.minimum(skull.envelope_distance(x, gradient=False)[0],
@@ -313,7 +319,7 @@ def brain_summary(
     out["deformed_volume_ml"] = brain_volume_ml(bm.nodes_mm, bm.tets, u)
     out["swelling_volume_ml"] = out.pop("swelling_volume") / 1000.0
     out["flap_nominal_area_cm2"] = bm.flap_area_cm2(case.flap)
-    out["flap_area_cm2"] = bm.free_area_cm2(case.flap, case.edge_radius_mm)
+    out["flap_area_cm2"] = bm.free_area_cm2(case.flap, skull=skull)
     out["max_hydrostatic_stress_kpa"] = out.pop("max_pressure")
     out["min_hydrostatic_stress_kpa"] = out.pop("min_pressure")
     out["max_penetration_mm"] = out["max_penetration"]

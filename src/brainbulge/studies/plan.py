@@ -2,7 +2,7 @@
 
 A *plan* is a list of :class:`~brainbulge.model.brain.CraniectomyCase` values, one per
 (centre, diameter) pair, all on one shared brain mesh: a flap is a boundary condition, opened
-on the loaded mesh (:func:`~brainbulge.model.brain.open_custom_flap`), not a new mesh.
+on the loaded mesh (:func:`~brainbulge.model.brain.open_case_flap`), not a new mesh.
 
 - :func:`plan_cases` makes the cases from candidate centres (given, or spread evenly over the
   convexity above the swelling by :func:`~brainbulge.geometry.brain.flap_fit.
@@ -45,7 +45,7 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.brain import BrainMesh
 from brainbulge.geometry.brain.boundaries import SuperiorBand
 from brainbulge.geometry.brain.flap_fit import fit_flap, signed_lateral_mm
-from brainbulge.model.brain import CraniectomyCase, open_custom_flap
+from brainbulge.model.brain import CraniectomyCase, open_case_flap
 from brainbulge.results.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
 from brainbulge.results.plan_measures import damage_measures
 from brainbulge.results.run_record import atomic_output
@@ -159,7 +159,7 @@ def plan_task(scenario: dict[str, Any], folder: Path) -> dict[str, Any]:
     threshold = config.pop("strain_threshold", STRAIN_THRESHOLD)
     case = case_from_dict(config)
     bm = shared_mesh(str(case.mesh))
-    open_custom_flap(bm, case)
+    open_case_flap(bm, case)
     key = _state_key(case, bm)
     folder = Path(folder)
     used: list[str] = []
@@ -181,9 +181,8 @@ def plan_task(scenario: dict[str, Any], folder: Path) -> dict[str, Any]:
     }
     if run.sol.converged:
         save_state(run.form, folder / STATE_FILE, key)
-    skull = bm.skull("custom", case.edge_radius_mm)
     summary = write_brain_outputs(run, folder, extra, measures=lambda points: damage_measures(
-        points, bm.flaps["custom"], skull, PARENCHYMA, threshold))
+        points, bm.flaps["custom"], run.skull, PARENCHYMA, threshold))
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 

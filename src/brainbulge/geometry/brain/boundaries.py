@@ -20,8 +20,12 @@ import numpy as np
 
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain.defaults import (
+    FLAP_DIAMETER_RANGE_MM,
     SUPERIOR_ELEVATION_DEG,
+    SUPERIOR_ELEVATION_RANGE_DEG,
     SUPERIOR_WIDTH_MM,
+    SUPERIOR_WIDTH_RANGE_MM,
+    UNILATERAL_DIAMETER_MM,
 )
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
 
@@ -31,8 +35,6 @@ _TET_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 #: Directions (RAS) from the brain centre to the centres of the named flaps.
 LEFT_FTP_DIRECTION = (-1.0, 0.1, 0.45)
 FRONTAL_DIRECTION = (0.0, 1.0, 0.55)
-#: Unilateral fronto-temporo-parietal flap diameter (mm), clinical guideline ~12 cm.
-UNILATERAL_DIAMETER_MM = 120.0
 #: Bifrontal flap antero-posterior extent (mm); its width is set by the area ratio.
 FRONTAL_AP_DIAMETER_MM = 120.0
 #: Depth (mm, below the frontal centre along its axis) down to which the bifrontal flap cuts,
@@ -56,12 +58,15 @@ class SuperiorBand:
     elevation_deg: float = SUPERIOR_ELEVATION_DEG
 
     def __post_init__(self) -> None:
-        if not 0 < self.width_mm <= 60:
-            raise InputError(f"superior band width {self.width_mm} mm must lie in (0, 60] "
-                             "(default 10: the superior sagittal sinus)")
-        if not -30 <= self.elevation_deg < 90:
+        lo, hi = SUPERIOR_WIDTH_RANGE_MM
+        if not lo < self.width_mm <= hi:
+            raise InputError(f"superior band width {self.width_mm} mm must lie in ({lo:g}, "
+                             f"{hi:g}] (default {SUPERIOR_WIDTH_MM:g}: the superior sagittal "
+                             "sinus)")
+        lo, hi = SUPERIOR_ELEVATION_RANGE_DEG
+        if not lo <= self.elevation_deg < hi:
             raise InputError(f"superior band elevation {self.elevation_deg} deg must lie in "
-                             "[-30, 90)")
+                             f"[{lo:g}, {hi:g})")
 
     def contains(self, points_mm: np.ndarray, plane_point_mm, plane_normal,
                  centre_mm: np.ndarray) -> np.ndarray:
@@ -219,8 +224,10 @@ def custom_flap(envelope: IntracranialEnvelope, centre_mm: tuple[float, float, f
                 diameter_mm: float, name: str = "custom") -> Flap:
     """A circular flap of ``diameter_mm`` centred where the ray from the brain centre through
     ``centre_mm`` meets the skull (so the centre need only be near the skull)."""
-    if not 10.0 <= diameter_mm <= 250.0:
-        raise InputError(f"flap diameter {diameter_mm} mm is outside 10-250 mm: give it in mm")
+    lo, hi = FLAP_DIAMETER_RANGE_MM
+    if not lo <= diameter_mm <= hi:
+        raise InputError(f"flap diameter {diameter_mm} mm is outside {lo:g}-{hi:g} mm: give it "
+                         "in mm")
     direction = np.asarray(centre_mm, float) - envelope.centre_mm()
     if np.linalg.norm(direction) < 1e-6:
         raise InputError("flap centre is the brain centre: give a point on the skull (mm)")

@@ -21,12 +21,11 @@ from brainbulge.geometry.brain.boundaries import (
     SuperiorBand,
     boundary_faces,
     clear_of_other_skull,
-    custom_flap,
     face_areas_mm2,
     frontal_flap,
     unilateral_flap,
 )
-from brainbulge.geometry.brain.defaults import VOLUME_OF
+from brainbulge.geometry.brain.defaults import BRAIN_VOLUME_RANGE_ML, VOLUME_OF
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
 from brainbulge.geometry.brain.interfaces import fit_interfaces
 from brainbulge.geometry.brain.labels import TISSUES, TissueImage
@@ -107,14 +106,16 @@ class BrainMesh:
         area = face_areas_mm2(self.nodes_mm, self.faces)
         return float(area[self.flap_faces[name]].sum() / 100)
 
-    def free_area_cm2(self, name: str, edge_radius_mm: float = EDGE_RADIUS_MM) -> float:
+    def free_area_cm2(self, name: str, edge_radius_mm: float = EDGE_RADIUS_MM,
+                      skull: RigidSkull | None = None) -> float:
         """Area of the outer surface the skull leaves free with flap ``name`` open (cm^2):
         the flap's faces, and the faces (base excluded) where the skull with the flap and its
         rounded cut edge lies more than :data:`FREE_GAP_MM` farther from the centroid than the
-        intact skull does. With the rounding in the bone it matches :meth:`flap_area_cm2`."""
+        intact skull does. With the rounding in the bone it matches :meth:`flap_area_cm2`.
+        ``skull``: that skull, if the caller has it (else made with ``edge_radius_mm``)."""
         area = face_areas_mm2(self.nodes_mm, self.faces)
         centroids = self.nodes_mm[self.faces].mean(axis=1)
-        skull = self.skull(name, edge_radius_mm)
+        skull = skull if skull is not None else self.skull(name, edge_radius_mm)
         phi_env, _ = skull.envelope_distance(centroids, gradient=False)
         phi, _ = skull.signed_distance(centroids, gradient=False)
         free = self.flap_faces[name] | ((phi_env - phi > FREE_GAP_MM) & ~self.base)
@@ -212,7 +213,8 @@ def build_brain_mesh(
     and skull; ``base_z_mm``: cut plane of the fixed base (default: 12 % of the height above the
     lowest point); ``midsagittal``: the left/right plane (default x = 0 for the template, else
     through the brain centroid). Flaps ``frontal``, ``left``, ``right`` are always made, and
-    ``custom`` when its centre is given. ``refinements``: Netgen meshes at about
+    ``custom`` when its centre is given (by the fitting rule,
+    :func:`~brainbulge.geometry.brain.flap_fit.open_flap`). ``refinements``: Netgen meshes at about
     ``target_tets / 8**refinements`` tets, which is then refined uniformly that many times
     (:mod:`refine`: new surface nodes on the envelope), so that mesh sequencing can start
     from the exact coarse solution: tissues are tagged (and their interfaces fitted) on the
@@ -237,8 +239,9 @@ def build_brain_mesh(
         raise InputError(f"target_tets = {target_tets} is outside 1e3-2e7: ask for e.g. 100000")
     envelope = intracranial_envelope(image, csf_layer_mm=csf_layer_mm)
     if brain_volume_ml is not None:
-        if not 50.0 <= brain_volume_ml <= 5000.0:
-            raise InputError(f"brain volume {brain_volume_ml} ml is outside 50-5000 ml")
+        lo, hi = BRAIN_VOLUME_RANGE_ML
+        if not lo <= brain_volume_ml <= hi:
+            raise InputError(f"brain volume {brain_volume_ml} ml is outside {lo:g}-{hi:g} ml")
         factor = (brain_volume_ml / _volume_of(image, envelope, volume_of)) ** (1 / 3)
         centre = envelope.centre_mm()
         image = image.scaled_about(factor, centre)
@@ -276,11 +279,15 @@ def build_brain_mesh(
         base_z_mm = float(z.min() + BASE_FRACTION * (z.max() - z.min()))
     def label(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray) -> BrainMesh:
         return _labelled(nodes, tets, tissue, image, envelope, midsagittal, base_z_mm,
-                         custom_flap_centre_mm, custom_flap_diameter_mm, frontal_area_ratio)
+                         frontal_area_ratio)
 
     mesh = label(nodes, tets, tissue)
     if keep_unrefined and refinements:
         mesh.unrefined = label(*netgen_mesh)
+    if custom_flap_centre_mm is not None:  # the one rule of every custom flap
+        from brainbulge.geometry.brain.flap_fit import open_flap
+
+        open_flap(mesh, custom_flap_centre_mm, custom_flap_diameter_mm)
     timings["boundaries"] = time.perf_counter() - t0
     mesh.timings_s = timings
     return mesh
@@ -300,8 +307,7 @@ def _tissues(nodes: np.ndarray, tets: np.ndarray, image: TissueImage,
 
 def _labelled(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, image: TissueImage,
               envelope: IntracranialEnvelope, midsagittal: MidSagittalPlane, base_z_mm: float,
-              custom_flap_centre_mm: tuple[float, float, float] | None,
-              custom_flap_diameter_mm: float, frontal_area_ratio: float) -> BrainMesh:
+              frontal_area_ratio: float) -> BrainMesh:
     """``(nodes, tets)`` with ``tissue``, sides, the base below ``base_z_mm`` and the flaps."""
     side = midsagittal.side(nodes[tets].mean(axis=1))
     faces, face_tet = boundary_faces(tets)
@@ -314,8 +320,6 @@ def _labelled(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, image: Ti
     for s in ("left", "right"):
         mesh.add_flap(unilateral_flap(envelope, s))
     mesh.add_flap(frontal_flap(envelope, nodes, faces, ~base, frontal_area_ratio))
-    if custom_flap_centre_mm is not None:
-        mesh.add_flap(custom_flap(envelope, custom_flap_centre_mm, custom_flap_diameter_mm))
     check_brain_mesh(mesh)
     return mesh
 
