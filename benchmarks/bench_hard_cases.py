@@ -130,8 +130,8 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dic
     from brainbulge.solver import ramp
     from brainbulge.solver.contact import points
     from brainbulge.solver.mixed import MixedForm
-    from brainbulge.solver.newton import NewtonSolver
     from brainbulge.solver.options import SolverOptions
+    from brainbulge.solver.ramp import NewtonSolver
 
     case = HemidiskCase(alpha=alpha, beta=beta, contact=contact)
     arc = case.skull_arc
@@ -181,9 +181,9 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str) -> dic
         kind = {"edge-smooth": SmoothEdgeContact,
                 "edge-hermite": HermiteEdgeContact}.get(variant, EdgeContact)
         form.point_contacts.append(kind(form, "skull|opening", edge_points(*geo)))
-    solver = NewtonSolver(form, SolverOptions(steps=case.steps))
+    # (no hotspot relaxation with edge points: its local problems know vertex points only)
+    solver = NewtonSolver(form, SolverOptions(steps=case.steps, hotspot_relaxation=not edges))
     if edges:
-        solver.relaxation = None  # its local problems know vertex contact points only
         solver.contact.moving[-1][:] = True
 
     def release(x) -> int:
