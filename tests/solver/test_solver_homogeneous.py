@@ -277,6 +277,14 @@ def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
         SolverOptions(intermediate_tolerance=-1e-6)
 
 
+@pytest.mark.parametrize("bad", [{"stagnation": -1}, {"stagnation": 1.5}, {"eta_max": 1.0},
+                                 {"eta_max": 1e-12}, {"carried_curvature_tolerance": 0.0}])
+def test_options_out_of_range_are_refused_by_name(bad) -> None:
+    (name,) = bad
+    with pytest.raises(InputError, match=name):
+        SolverOptions(**bad)
+
+
 def test_an_attempt_that_stagnates_stops_early() -> None:
     """Newton directions that the line search can follow only in tiny steps (the true
     direction with 5 % noise: the incompressible solid takes ~1/64 of it) end the attempt

@@ -16,9 +16,9 @@ starting from ``kappa_0 = CONTRAST_START`` (the parenchyma's own contrast, white
 and multiplying ``kappa`` by ``CONTRAST_STEP`` up to the model's contrast
 ``kappa_model = mu_max / mu_min``; every step is Newton at full load from the last
 equilibrium, which must lower the scaled residual by ``SolverOptions.contrast_progress``
-(10x within 3 iterations by default): a healthy step
-converges quadratically, while the 1.40M-tet template's last step fell 1.7x in 3 iterations
-of ~3 minutes each and then stagnated. A step that fails ends the path and the caller falls
+(10x within 3 iterations by default): a healthy step converges quadratically, while the
+1.40M-tet template's last step fell 1.7x in 3 iterations of ~3 minutes each and then
+stagnated. A step that fails ends the path and the caller falls
 back (mesh sequencing: to the load ramp).
 The last step is the model itself: the state reached is its equilibrium to the solver's
 tolerance, the intermediate materials are only the way there. A problem whose contrast is
