@@ -161,8 +161,8 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str,
     from brainbulge.solver import ramp
     from brainbulge.solver.contact import points
     from brainbulge.solver.mixed import MixedForm
-    from brainbulge.solver.newton import NewtonSolver
     from brainbulge.solver.options import SolverOptions
+    from brainbulge.solver.ramp import NewtonSolver
 
     case = HemidiskCase(alpha=alpha, beta=beta, contact=contact)
     arc = case.skull_arc
@@ -216,9 +216,10 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str,
         form.point_contacts.append(kind(form, "skull|opening", edge_points(*geo)))
         if blend is not None and kind is VertexEdgeContact:
             form.point_contacts[-1].blend = blend
-    solver = NewtonSolver(form, SolverOptions(steps=case.steps, tolerance=tolerance))
+    # (no hotspot relaxation with edge points: its local problems know vertex points only)
+    solver = NewtonSolver(form, SolverOptions(steps=case.steps, tolerance=tolerance,
+                                              hotspot_relaxation=not edges))
     if edges:
-        solver.relaxation = None  # its local problems know vertex contact points only
         solver.contact.moving[-1][:] = True
 
     def release(x) -> int:

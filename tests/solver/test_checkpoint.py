@@ -23,11 +23,11 @@ def _solver(path, key: str = "case A", stop_above: float | None = None) -> Newto
     solver.loads = []  # the load of each Newton solve
     newton = solver.newton
 
-    def logged(x):
+    def logged(x, *args, **kwargs):
         solver.loads.append(form.load.Get())
         if stop_above is not None and form.load.Get() > stop_above:
             raise Stop
-        return newton(x)
+        return newton(x, *args, **kwargs)
 
     solver.newton = logged
     return solver

@@ -13,7 +13,7 @@ import pytest
 
 from brainbulge.materials.ogden import Ogden
 from brainbulge.model.brain import tissue_materials
-from brainbulge.solver import SolverOptions
+from brainbulge.solver import NewtonSolver, SolverOptions
 from brainbulge.solver.contrast import (
     CONTRAST_START,
     CONTRAST_STEP,
@@ -22,7 +22,6 @@ from brainbulge.solver.contrast import (
     contrast_path,
 )
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.remesh.sequencing import solve_sequenced
 from contact_cases import GRAY, A, _capped_ball
 
@@ -89,14 +88,11 @@ def test_the_path_ends_at_the_models_equilibrium() -> None:
     assert np.abs(lam - lam_ref).max() < 1e-4 * lam_ref.max()
 
 
-def test_a_step_without_progress_ends_the_path_and_the_ramp_takes_over(monkeypatch) -> None:
+def test_a_step_without_progress_ends_the_path_and_the_ramp_takes_over() -> None:
     """A contrast step whose residual does not fall fast enough gives up (here: a
     requirement no Newton iteration meets); mesh sequencing then ramps the fine mesh's load
     and still reaches the model's equilibrium."""
-    from brainbulge.solver import contrast as contrast_module
-
-    monkeypatch.setattr(contrast_module, "REQUIRED_PROGRESS", (1, 1e-30))
-    options = SolverOptions(steps=2)
+    options = SolverOptions(steps=2, contrast_progress=(1, 1e-30))
     coarse, fine = _soft_matrix_forms()
     sol, record = solve_sequenced(coarse, fine, options)
     assert record.coarse_converged and not record.fine_converged

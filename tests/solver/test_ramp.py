@@ -7,8 +7,7 @@ import ngsolve as ngs
 import numpy as np
 import pytest
 
-from brainbulge.solver import SolverOptions
-from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver import NewtonSolver, SolverOptions
 from brainbulge.solver.options import DIVERGENCE_ADVICE
 from contact_cases import _coords, _forms
 
@@ -40,8 +39,9 @@ def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
 
 def test_a_diverged_ramp_says_where_the_force_was_unbalanced() -> None:
     """Newton limited to one iteration per attempt cannot take a load step: the message
-    and the Solution's failure name the load, the smallest step tried and the deformed
-    position of the largest unbalanced force; a caller may give its own advice."""
+    and the Solution's failure name the load, the smallest step tried, the last attempt's
+    residual, iterations and why it gave up, and the deformed position of the largest
+    unbalanced force; a caller may give its own advice."""
     coarse, _ = _forms()
     sol = NewtonSolver(coarse, SolverOptions(steps=1, max_iterations=1, min_step=0.3)).solve()
     assert not sol.converged and sol.load == 0.0 and sol.swelling_reached == 1.0
@@ -49,6 +49,10 @@ def test_a_diverged_ramp_says_where_the_force_was_unbalanced() -> None:
     assert failure is not None and failure.kept == 0.0
     assert failure.step == pytest.approx(0.5) and failure.load == pytest.approx(0.5)
     assert sol.failure_site is failure.site and np.all(np.isfinite(failure.site))
+    assert failure.iterations == 1 and failure.residual > OPTIONS.tolerance
+    assert failure.reason == "max_iterations = 1 reached"
+    assert (f"(the last attempt: |R| = {failure.residual:.2e} after 1 Newton iteration, "
+            "max_iterations = 1 reached)") in sol.message
     assert "largest unbalanced force was at (" in sol.message
     where = ", ".join(f"{c:.4g}" for c in sol.failure_site)
     assert where in sol.message

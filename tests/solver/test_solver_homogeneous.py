@@ -250,18 +250,17 @@ def test_when_the_energy_is_split() -> None:
     assert split_energy(SPLIT_MIN_ELEMENTS, 4, native=True)
 
 
-def test_intermediate_load_steps_stop_at_the_looser_tolerance(monkeypatch) -> None:
-    """Below full load Newton stops at ``INTERMEDIATE_TOLERANCE``, at full load at
+def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
+    """Below full load Newton stops at ``intermediate_tolerance``, at full load at
     ``tolerance``: fewer iterations, the same final state (hyperelastic: path independent)."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-    from brainbulge.solver import ramp
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1)
     sols = []
     for itol in (1e-9, 1e-5):
         form = MixedForm(hemidisk_problem(case))
-        monkeypatch.setattr(ramp, "INTERMEDIATE_TOLERANCE", itol)
-        solver = NewtonSolver(form, SolverOptions(steps=4, tolerance=1e-9))
+        solver = NewtonSolver(form, SolverOptions(steps=4, tolerance=1e-9,
+                                                  intermediate_tolerance=itol))
         sol = solver.solve()
         assert sol.converged
         finals = [h[-1] for h in solver.history]
@@ -274,22 +273,30 @@ def test_intermediate_load_steps_stop_at_the_looser_tolerance(monkeypatch) -> No
     assert np.linalg.norm(x_loose - x_tight) <= 1e-6 * np.linalg.norm(x_tight)
     with pytest.raises(InputError, match="must be positive"):
         SolverOptions(tolerance=0.0)
+    with pytest.raises(InputError, match="intermediate_tolerance"):
+        SolverOptions(intermediate_tolerance=-1e-6)
 
 
-def test_an_attempt_that_stagnates_stops_early(monkeypatch) -> None:
+@pytest.mark.parametrize("bad", [{"stagnation": -1}, {"stagnation": 1.5}, {"eta_max": 1.0},
+                                 {"eta_max": 1e-12}, {"carried_curvature_tolerance": 0.0}])
+def test_options_out_of_range_are_refused_by_name(bad) -> None:
+    (name,) = bad
+    with pytest.raises(InputError, match=name):
+        SolverOptions(**bad)
+
+
+def test_an_attempt_that_stagnates_stops_early() -> None:
     """Newton directions that the line search can follow only in tiny steps (the true
     direction with 5 % noise: the incompressible solid takes ~1/64 of it) end the attempt
-    after ``STAGNATION`` such iterations; with ``STAGNATION = 0`` it goes on (here until the
-    line search finds no step at all)."""
+    after ``stagnation`` such iterations, saying so; with ``stagnation = 0`` it goes on
+    (here until the line search finds no step at all)."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-    from brainbulge.solver import newton
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
-    runs = {}
+    runs, reasons = {}, {}
     for stagnation in (4, 0):
         form = MixedForm(hemidisk_problem(case))
-        monkeypatch.setattr(newton, "STAGNATION", stagnation)
-        solver = NewtonSolver(form, SolverOptions(max_iterations=20))
+        solver = NewtonSolver(form, SolverOptions(max_iterations=20, stagnation=stagnation))
         rng = np.random.default_rng(0)
 
         def noisy(x, K=None, guess=None, exact=solver.newton_direction, rng=rng):
@@ -301,26 +308,27 @@ def test_an_attempt_that_stagnates_stops_early(monkeypatch) -> None:
         solver.newton_direction = noisy
         form.set_load(0.5)
         runs[stagnation] = solver.newton(form.gfu.vec)
+        reasons[stagnation] = solver.failure_reason
     (ok4, its4, norm4), (ok0, its0, norm0) = runs[4], runs[0]
     assert not ok4 and not ok0
     assert its4 == 4 and its0 > 8
     assert norm0 < norm4  # the short steps did lower the residual, a little
+    assert reasons[4].startswith("stagnated: 4 line-search steps")
+    assert reasons[0] in ("the line search found no step lowering |R|",
+                          "max_iterations = 20 reached")
 
 
-def test_a_slow_newton_solve_logs_its_iterations(box2d, monkeypatch, caplog) -> None:
-    """Past ``SLOW_NEWTON_S`` of a Newton solve every iteration is logged at INFO (a long
+def test_a_slow_newton_solve_logs_its_iterations(box2d, caplog) -> None:
+    """Past ``slow_newton_s`` of a Newton solve every iteration is logged at INFO (a long
     fine-mesh solve shows progress); before that at DEBUG only."""
     import logging
-
-    import brainbulge.solver.newton as newton
 
     problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.2}, clamped_components=SYMMETRY)
     with caplog.at_level(logging.INFO, logger="brainbulge"):
         solve(problem, element="mini")
     assert not [r for r in caplog.records if "newton 0:" in r.getMessage()]
-    monkeypatch.setattr(newton, "SLOW_NEWTON_S", -1.0)
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="brainbulge"):
-        solve(problem, element="mini")
+        solve(problem, element="mini", options=SolverOptions(slow_newton_s=-1.0))
     lines = [r for r in caplog.records if "newton" in r.getMessage() and "|R|" in r.getMessage()]
     assert lines and all(r.levelno == logging.INFO for r in lines)

@@ -261,7 +261,7 @@ def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_pa
                                                          monkeypatch) -> None:
     """A run stopped in its second load step leaves ``restart.npz``; run again into the same
     folder it solves only the missing step, then removes the file."""
-    from brainbulge.solver.newton import NewtonSolver
+    from brainbulge.solver import NewtonSolver
 
     class Killed(Exception):
         pass
@@ -269,11 +269,11 @@ def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_pa
     loads = []
     newton = NewtonSolver.newton
 
-    def logged(self, x):
+    def logged(self, x, *args, **kwargs):
         loads.append(self.form.load.Get())
         if kill and self.form.load.Get() > 0.6:
             raise Killed
-        return newton(self, x)
+        return newton(self, x, *args, **kwargs)
 
     monkeypatch.setattr(NewtonSolver, "newton", logged)
     config = {"flap": "frontal", "swell": "left", "steps": 2}

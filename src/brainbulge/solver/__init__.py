@@ -1,12 +1,13 @@
 """The solve, as a pipeline: the mixed u-p form (:mod:`.mixed`), the load ramp (:mod:`.ramp`,
-with its restart file :mod:`.restart`), Newton with a line search (:mod:`.newton`) on the
-discrete equations (:mod:`.equations`), the skull contact's active set (:mod:`.contact`),
+with its restart file :mod:`.restart`) calling Newton with a line search (:mod:`.newton`) on
+the discrete equations (:mod:`.equations`), the skull contact's active set (:mod:`.contact`),
 the linear solvers (:mod:`.linear`), fast paths (:mod:`.fast`) and mesh changes during a
-solve (:mod:`.remesh`); options and results in :mod:`.options`."""
+solve (:mod:`.remesh`); options (every tunable, one dataclass) and results in
+:mod:`.options`."""
 
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver, solve
 from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
+from brainbulge.solver.ramp import NewtonSolver, solve
 
 __all__ = ["Failure", "MixedForm", "NewtonSolver", "Solution", "SolverOptions", "StepRecord",
            "solve"]

@@ -15,9 +15,10 @@ kappa``,
 starting from ``kappa_0 = CONTRAST_START`` (the parenchyma's own contrast, white over gray)
 and multiplying ``kappa`` by ``CONTRAST_STEP`` up to the model's contrast
 ``kappa_model = mu_max / mu_min``; every step is Newton at full load from the last
-equilibrium, which must lower the scaled residual by ``REQUIRED_PROGRESS``: a healthy step
-converges quadratically, while the 1.40M-tet template's last step fell 1.7x in 3 iterations
-of ~3 minutes each and then stagnated. A step that fails ends the path and the caller falls
+equilibrium, which must lower the scaled residual by ``SolverOptions.contrast_progress``
+(10x within 3 iterations by default): a healthy step converges quadratically, while the
+1.40M-tet template's last step fell 1.7x in 3 iterations of ~3 minutes each and then
+stagnated. A step that fails ends the path and the caller falls
 back (mesh sequencing: to the load ramp).
 The last step is the model itself: the state reached is its equilibrium to the solver's
 tolerance, the intermediate materials are only the way there. A problem whose contrast is
@@ -33,8 +34,8 @@ import time
 from collections.abc import Callable
 
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.ramp import NewtonSolver
 
 log = logging.getLogger("brainbulge")
 
@@ -44,10 +45,6 @@ log = logging.getLogger("brainbulge")
 CONTRAST_START = 2.0
 #: growth of the contrast per step (2 -> 6.3 -> 20 for the brain's CSF)
 CONTRAST_STEP = math.sqrt(10.0)
-#: (iterations, factor): each step's Newton solve gives up when its scaled residual has not
-#: fallen below factor times its first after that many iterations (the converged steps
-#: logged on the 100k- and 1.40M-tet templates fell 40-18,000x, from 2e-3 to 3e-2)
-REQUIRED_PROGRESS = (3, 0.1)
 
 
 def contrast(materials: dict) -> float:
@@ -90,6 +87,8 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
     target = path[-1]
     kappa = path[0]
     previous: MixedForm | None = None
+    step_options = (dataclasses.replace(options, required_progress=options.contrast_progress)
+                    if len(path) > 1 else options)
     records, linear, assembly, solve_time = [], 0, 0.0, 0.0
     first: float | None = None
     while True:
@@ -100,9 +99,7 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
             start(step_form)
         else:
             _copy_state(previous, step_form)
-        solver = NewtonSolver(step_form, options)
-        if len(path) > 1:
-            solver.required_progress = REQUIRED_PROGRESS
+        solver = NewtonSolver(step_form, step_options)
         sol = solver.equilibrate()
         solver.release_linear_solver()
         if first is None and solver.history:

@@ -20,23 +20,27 @@ import scipy.sparse as sp
 
 from brainbulge.heap import release_free_memory
 from brainbulge.solver.contact.active_set import ActiveSet
-from brainbulge.solver.inexact import ETA_MAX
 from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.linear.sparse_reuse import PatternAdd, PatternGather, PatternProject
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.options import SolverOptions
 
 log = logging.getLogger("brainbulge")
 
 
 class MixedEquations:
     """``R(x)``, ``|R|``, ``K(x)`` and the Newton direction of a :class:`MixedForm` on its
-    free DOFs, solved by the linear solver ``linear_solver`` ("pardiso" or "krylov")."""
+    free DOFs, solved by the linear solver of ``options`` (:class:`SolverOptions`: also
+    whether the closed-form MINI tangent is used where it applies)."""
 
-    def __init__(self, form: MixedForm, linear_solver: str = "pardiso") -> None:
+    def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
+        self.opt = options = options or SolverOptions()
         self.form = form
-        self.linear: LinearSolver = make_linear_solver(linear_solver, form)
+        krylov = ({} if options.krylov_max_iterations is None
+                  else {"maxiter": options.krylov_max_iterations})
+        self.linear: LinearSolver = make_linear_solver(options.linear_solver, form, **krylov)
         self.closed = None  # the closed-form residual and tangent, where they apply
-        if form.element == "mini":
+        if form.element == "mini" and options.closed_form:
             # (Numba, ~0.5 s: imported only where it may apply)
             from brainbulge.solver.fast import mini_plane, mini_tangent
 
@@ -65,8 +69,8 @@ class MixedEquations:
         self.with_curvature = True  # the contacts' curvature term in the next tangent
         self.contact = ActiveSet(form, self.free, fes.ndof)
         # inexact Newton (Eisenstat-Walker): relative tolerance of an iterative linear solve
-        self.inexact = linear_solver == "krylov"
-        self.eta = self.eta_cap = ETA_MAX
+        self.inexact = options.linear_solver == "krylov"
+        self.eta = self.eta_cap = options.eta_max
         self.last_linear_solution: np.ndarray | None = None
         self._new_plans()
 

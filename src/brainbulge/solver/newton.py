@@ -7,11 +7,15 @@ the contact forces. Newton's iteration is::
     K(x_k) dx = R(x_k),        x_{k+1} = x_k - s dx,        lambda_{k+1} = lambda_k - s dlam
 
 with the contact constraints of the active set (:mod:`brainbulge.solver.contact`), and ``s``
-halved from 1 until the scaled residual :meth:`NewtonSolver.scaled_norm` falls by the
+halved from 1 until the scaled residual :meth:`Newton.scaled_norm` falls by the
 Armijo factor ``1 - 1e-4 s``. With the Krylov solver the linear solve is inexact, to the
-relative tolerance of :func:`brainbulge.solver.inexact.forcing_term`.
+relative tolerance of :func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with
+its reason, after ``max_iterations``, at a non-finite residual, when the line search finds no
+step, after ``stagnation`` short steps in a row, or when it falls short of
+``required_progress`` (:class:`SolverOptions`).
 
-The load ramp around it (predictor, cut-back, restart) is :mod:`brainbulge.solver.ramp`.
+This is one nonlinear solve at the form's current load; the load ramp that calls it
+(predictor, cut-back, restart) is :mod:`brainbulge.solver.ramp`.
 """
 
 from __future__ import annotations
@@ -24,80 +28,52 @@ import ngsolve as ngs
 import numpy as np
 
 from brainbulge.errors import ConvergenceError
-from brainbulge.model.problem import Problem
-from brainbulge.solver import ramp
 from brainbulge.solver.equations import MixedEquations
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
-from brainbulge.solver.inexact import ETA_MAX, ETA_MIN, forcing_term
+from brainbulge.solver.inexact import ETA_MIN, forcing_term
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import SolverOptions
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
 
-#: an attempt stops early, as failed, after this many Newton iterations in a row whose line
-#: search accepted at most 1/64 of the step and that together lowered the residual by less
-#: than 5 % (where the load path folds, the 2D alpha 80 / beta 30 runs spent all 20
-#: iterations on 0.1-0.4 % steps, attempt after attempt)
-STAGNATION = 4
-#: a Newton solve running longer than this [s] logs each iteration at INFO (else DEBUG), so
-#: that a long fine-mesh solve shows its progress in the log
-SLOW_NEWTON_S = 30.0
 
-
-class NewtonSolver(MixedEquations):
-    """Newton + load stepping for a :class:`MixedForm`.
+class Newton(MixedEquations):
+    """Newton's method at one load for a :class:`MixedForm`, controlled by ``options``
+    (:class:`SolverOptions`: tolerance, iterations, the linear solver and the accelerations).
 
     Two accelerations apply where they can, each the plain path's result to round-off:
-    ``closed`` (the closed-form MINI tangent, :mod:`brainbulge.solver.fast.mini_tangent`) and
-    ``relaxation`` (local solves at residual hotspots, :mod:`brainbulge.solver.fast.hotspot`);
-    either set to None after construction takes the plain path.
+    ``closed`` (the closed-form MINI tangent, :mod:`brainbulge.solver.fast.mini_tangent`;
+    option ``closed_form``) and ``relaxation`` (local solves at residual hotspots,
+    :mod:`brainbulge.solver.fast.hotspot`; option ``hotspot_relaxation``).
     """
 
     def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
-        self.opt = options or SolverOptions()
-        super().__init__(form, self.opt.linear_solver)
+        super().__init__(form, options)
         self.history: list[list[float]] = []  # scaled residual norms of each Newton solve
-        self.tolerance = self.opt.tolerance  # of the next Newton solve (set by the ramp)
         self.tightened_solves = 0  # directions solved again tighter after a failed line search
         self.failure_site: np.ndarray | None = None  # of the last Newton solve that failed
-        #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
-        #: after ``k`` iterations gives up (None: no such requirement)
-        self.required_progress: tuple[int, float] | None = None
-        #: a failed Krylov solve is retried once, tighter, with a fresh preconditioner
-        #: (False: the Newton solve fails at once, e.g. from a start state that a ramp can
-        #: replace)
-        self.retry_linear = True
+        self.failure_reason = ""  # why the last Newton solve failed ("": it converged)
         self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
-        self.relaxation = (HotspotRelaxation(self) if HotspotRelaxation.applies(form)
-                           else None)
+        self.relaxation = (HotspotRelaxation(self) if self.opt.hotspot_relaxation
+                           and HotspotRelaxation.applies(form) else None)
 
-    # --- the load ramp (brainbulge.solver.ramp) ----------------------------------------
-    def solve(self) -> Solution:
-        """Ramp the load from ``start_load`` (or a restart file) to 1; the last converged
-        state (:func:`brainbulge.solver.ramp.ramp_load`)."""
-        return ramp.ramp_load(self)
-
-    def equilibrate(self) -> Solution:
-        """Newton at the form's current load from its current state, without load steps
-        (:func:`brainbulge.solver.ramp.equilibrate`)."""
-        return ramp.equilibrate(self)
-
-    # --- Newton's iteration ------------------------------------------------------------
-    def newton(self, x: ngs.BaseVector, curvature_below: float = np.inf
-               ) -> tuple[bool, int, float]:
+    def newton(self, x: ngs.BaseVector, tolerance: float | None = None,
+               curvature_below: float = np.inf) -> tuple[bool, int, float]:
         """Solve at the current load from the guess ``x`` (updated in place, with the
-        contact multipliers) to ``self.tolerance``; returns (converged, iterations, scaled
-        residual). On failure ``self.failure_site`` is where the force residual peaks.
+        contact multipliers) to ``tolerance`` (default: the options' final one); returns
+        (converged, iterations, scaled residual). On failure ``self.failure_site`` is where
+        the force residual peaks and ``self.failure_reason`` says why it gave up.
 
         ``curvature_below``: the contacts' curvature term enters the tangent only at
         iterates whose scaled residual is at most this (a modified Newton method far from
-        the solution, :data:`brainbulge.solver.ramp.CARRIED_CURVATURE_TOLERANCE`)."""
+        the solution, option ``carried_curvature_tolerance``)."""
+        tol = self.opt.tolerance if tolerance is None else tolerance
         # one OpenBLAS thread beside PARDISO (brainbulge.solver.threads); the Krylov path's
         # long vectors keep theirs (111k-tet brain: 10 % slower on one)
         try:
             with nullcontext() if self.inexact else serial_openblas():
-                ok, its, norm = self._newton(x, curvature_below)
+                ok, its, norm, self.failure_reason = self._newton(x, tol, curvature_below)
             if not ok:
                 self.failure_site = self.residual_site(x)
             return ok, its, norm
@@ -127,29 +103,37 @@ class NewtonSolver(MixedEquations):
         u = np.where(dofs[v] >= 0, x.FV().NumPy()[np.maximum(dofs[v], 0)], 0.0)
         return X[v] + u
 
-    def _newton(self, x: ngs.BaseVector, curvature_below: float) -> tuple[bool, int, float]:
+    def _newton(self, x: ngs.BaseVector, tol: float, curvature_below: float
+                ) -> tuple[bool, int, float, str]:
+        """:meth:`newton`'s iteration: (converged, iterations, scaled residual, why it
+        gave up)."""
+        opt = self.opt
         pcs = self.contact.contacts
         self.contact.start_solve()
-        self.eta = self.eta_cap = ETA_MAX
+        self.eta = self.eta_cap = opt.eta_max
         self.linear.new_load_step()
         norm = self.scaled_norm(self.residual(x))
         self.history.append([])
         short_steps, norm_before_short = 0, norm  # the run of short line-search steps
         started = time.perf_counter()
-        for it in range(self.opt.max_iterations + 1):
+        for it in range(opt.max_iterations + 1):
             self.history[-1].append(norm)
             elapsed = time.perf_counter() - started
-            log.log(logging.INFO if elapsed > SLOW_NEWTON_S else logging.DEBUG,
+            log.log(logging.INFO if elapsed > opt.slow_newton_s else logging.DEBUG,
                     "    newton %d: |R| = %.3e (%.0f s)", it, norm, elapsed)
-            if norm <= self.tolerance:
-                return True, it, norm
-            if not np.isfinite(norm) or it == self.opt.max_iterations:
-                return False, it, norm
-            if (self.required_progress is not None and it == self.required_progress[0]
-                    and norm > self.required_progress[1] * self.history[-1][0]):
+            if norm <= tol:
+                return True, it, norm, ""
+            if not np.isfinite(norm):
+                return False, it, norm, "the residual is not finite"
+            if it == opt.max_iterations:
+                return False, it, norm, f"max_iterations = {it} reached"
+            progress = opt.required_progress
+            if (progress is not None and it == progress[0]
+                    and norm > progress[1] * self.history[-1][0]):
                 log.debug("    too slow: |R| %.3e after %d iterations from %.3e", norm, it,
                           self.history[-1][0])
-                return False, it, norm
+                return False, it, norm, (f"too slow: |R| above {progress[1]:g} times its "
+                                         f"first ({self.history[-1][0]:.2e})")
             K_x = None  # the tangent at x0, shared by the retries of this iteration
             self.last_linear_solution = None  # and the last direction, their Krylov guess
             x0 = x.CreateVector()
@@ -162,20 +146,20 @@ class NewtonSolver(MixedEquations):
                         self.with_curvature = norm <= curvature_below
                         K_x = self.tangent(x)
                     dx, dlams = self.newton_direction(x, K_x, self.last_linear_solution)
-                except ConvergenceError:
-                    if not self.inexact or self.eta <= ETA_MIN or not self.retry_linear:
-                        return False, it, norm
+                except ConvergenceError as exc:
+                    if not self.inexact or self.eta <= ETA_MIN or not opt.retry_linear:
+                        return False, it, norm, f"the linear solve failed ({exc})"
                     # a failed Krylov solve has asked for a fresh AMG: retry it, tighter
                     log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
                     self.eta = ETA_MIN
                     try:
                         dx, dlams = self.newton_direction(x, K_x)
-                    except ConvergenceError:
-                        return False, it, norm
-                s, trial, tightened = self._line_search(x, x0, lam0, dx, dlams, norm,
+                    except ConvergenceError as exc:
+                        return False, it, norm, f"the linear solve failed ({exc})"
+                s, trial, tightened = self._line_search(x, x0, lam0, dx, dlams, norm, tol,
                                                         retry=attempt < 3, tightened=tightened)
                 if s is None:
-                    return False, it, norm
+                    return False, it, norm, "the line search found no step lowering |R|"
                 if s > 0:
                     self._log_step(s)
                     # (a full step that does not halve the residual is not the Krylov
@@ -183,30 +167,32 @@ class NewtonSolver(MixedEquations):
                     # instead of 1e-4 gave the same Newton residuals to four digits;
                     # tightening after such steps only doubled the GMRES iterations)
                     self.eta = min(self.eta_cap, forcing_term(self.eta, trial / norm, trial,
-                                                              self.tolerance))
+                                                              tol, opt.eta_max))
                     if s > 1 / 64:
                         short_steps, norm_before_short = 0, trial
                     else:
                         short_steps += 1
                     norm = trial
-                    if self.relaxation is not None and norm > self.tolerance:
+                    if self.relaxation is not None and norm > tol:
                         norm = self.relaxation.relax(x, norm)
                     break
                 self._restore(x, x0, lam0)  # retry the direction at x0
                 self.residual(x)
             self.contact.let_pulling_go()
-            if (0 < STAGNATION <= short_steps and norm > self.tolerance
+            if (0 < opt.stagnation <= short_steps and norm > tol
                     and norm > 0.95 * norm_before_short):
                 log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
                           norm_before_short)
-                return False, it + 1, norm
-        return False, self.opt.max_iterations, norm
+                return False, it + 1, norm, (f"stagnated: {short_steps} line-search steps "
+                                             "of at most 1/64 in a row")
+        its = opt.max_iterations  # (not reached: the loop returns at its last iteration)
+        return False, its, norm, f"max_iterations = {its} reached"
 
     def _line_search(self, x: ngs.BaseVector, x0: ngs.BaseVector, lam0: list[np.ndarray],
-                     dx: ngs.BaseVector, dlams: list[np.ndarray], norm: float, retry: bool,
-                     tightened: bool) -> tuple[float | None, float, bool]:
+                     dx: ngs.BaseVector, dlams: list[np.ndarray], norm: float, tol: float,
+                     retry: bool, tightened: bool) -> tuple[float | None, float, bool]:
         """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
-        ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance.
+        ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
 
         Returns ``(s, |R(trial)|, tightened)``: ``s > 0`` accepted (``x`` is the trial state);
         ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
@@ -221,7 +207,7 @@ class NewtonSolver(MixedEquations):
             for pc, l0, dl in zip(pcs, lam0, dlams, strict=True):
                 pc.lam = l0 - s * dl
             trial = self.scaled_norm(self.residual(x))
-            if trial < (1 - 1e-4 * s) * norm or trial <= self.tolerance:
+            if trial < (1 - 1e-4 * s) * norm or trial <= tol:
                 return s, trial, tightened
             if s == 1.0 and retry and self.contact.force_penetrating():
                 return 0.0, trial, tightened
@@ -254,13 +240,3 @@ class NewtonSolver(MixedEquations):
                   "" if self.with_curvature or not pcs else ", no curvature",
                   f", Krylov rtol {self.eta:.1e}" if self.inexact else "")
 
-
-def solve(
-    problem: Problem,
-    element: str = "taylor-hood",
-    options: SolverOptions | None = None,
-    compile_energy: bool = False,
-) -> Solution:
-    """Build the mixed form of ``problem`` and ramp the swelling to its target."""
-    form = MixedForm(problem, element=element, compile_energy=compile_energy)
-    return NewtonSolver(form, options).solve()

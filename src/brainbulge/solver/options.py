@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.solver.inexact import ETA_MIN
 
 if TYPE_CHECKING:
     from brainbulge.solver.mixed import MixedForm
@@ -29,49 +30,106 @@ LINEAR_SOLVERS = ("pardiso", "krylov")
 
 @dataclass
 class SolverOptions:
-    """Load stepping and Newton controls.
+    """Everything a caller may tune in a solve: the load ramp's, Newton's and the linear
+    solver's controls, each with its default and why (:mod:`brainbulge.solver.ramp`,
+    :mod:`brainbulge.solver.newton`). A solver takes them at construction; for other
+    values build another one (``dataclasses.replace(options, ...)``)."""
 
-    Attributes:
-        steps: initial number of equal load steps from ``Js = 1`` to the target.
-        min_step: smallest load increment ``dt`` before the ramp gives up [-].
-        max_iterations: Newton iterations per attempt at one load.
-        tolerance: on the scaled residual at full load (force / (mu L^(d-1)),
-            volume / |Omega|; :meth:`NewtonSolver.scaled_norm`).
-        linear_solver: "pardiso" (direct) or "krylov" (GMRES with AMG blocks, inexact Newton).
-        progress: show a progress bar over the load.
-        checkpoint: restart file written after each accepted load step and read at the
-            start when it holds the same problem (:mod:`brainbulge.solver.restart`).
-        checkpoint_key: identifies the problem in the restart file (e.g. the inputs as
-            JSON); a file with another key is ignored and overwritten.
-        start_load: load factor of the form's current state, where the ramp starts
-            (a state carried over from another mesh by rezoning).
-        stop_when: asked after each accepted load step below full load; ``True`` stops the
-            ramp there (the state is kept, ``converged`` is false, ``stopped_early`` true).
-        stop_on_failure: asked with the last converged load when a load step fails,
-            before it is cut; ``True`` stops the ramp there as ``stop_when`` does.
-    """
-
+    # --- the load ramp -------------------------------------------------------------------
+    #: initial number of equal load steps from ``Js = 1`` to the target
     steps: int = 5
+    #: smallest load increment ``dt`` [-] before the ramp gives up with a :class:`Failure`
     min_step: float = 1e-3
-    max_iterations: int = 20
-    tolerance: float = 1e-9
-    linear_solver: str = "pardiso"
-    progress: bool = False
-    checkpoint: str | Path | None = None
-    checkpoint_key: str = ""
+    #: load factor [-] of the form's current state, where the ramp starts (a state carried
+    #: over from another mesh by rezoning)
     start_load: float = 0.0
+    #: asked after each accepted load step below full load; ``True`` stops the ramp there
+    #: (the state is kept, ``converged`` is false, ``stopped_early`` true)
     stop_when: Callable[[], bool] | None = None
+    #: asked with the last converged load when a load step fails, before it is cut; ``True``
+    #: stops the ramp there as ``stop_when`` does
     stop_on_failure: Callable[[float], bool] | None = None
+    #: restart file written after each accepted load step and read at the start when it
+    #: holds the same problem (:mod:`brainbulge.solver.restart`)
+    checkpoint: str | Path | None = None
+    #: identifies the problem in the restart file (e.g. the inputs as JSON); a file with
+    #: another key is ignored and overwritten
+    checkpoint_key: str = ""
+    #: show a progress bar over the load
+    progress: bool = False
+
+    # --- Newton --------------------------------------------------------------------------
+    #: Newton iterations per attempt at one load
+    max_iterations: int = 20
+    #: on the scaled residual at full load [-] (force / (mu L^(d-1)), volume / |Omega|;
+    #: :meth:`~brainbulge.solver.equations.MixedEquations.scaled_norm`)
+    tolerance: float = 1e-9
+    #: Newton's tolerance below full load [-] (never tighter than ``tolerance``). The
+    #: material is hyperelastic, so an intermediate state is only the start of the next
+    #: step (its extrapolation starts ~1e-3 away): converging it further buys nothing.
+    #: Saves about one Newton iteration per intermediate load step (2D headline: 20 -> 18).
+    intermediate_tolerance: float = 1e-6
+    #: Newton from a carried-over state (``NewtonSolver.equilibrate``: mesh sequencing,
+    #: another flap's solution) leaves the point contacts' curvature term out of the tangent
+    #: until the scaled residual is at most this [-] (a modified Newton method far from the
+    #: solution, the exact tangent for the end game; ``inf``: always in). At a state carried
+    #: over from a coarse mesh the flap rim's contact points press with up to ~350 kPa on the
+    #: skull's convex rounded cut edge, where the term ``-A lambda grad^2 g`` makes sliding
+    #: along the edge nearly free: the exact Newton direction slid points by 5-8 mm and
+    #: folded elements (line-search steps of 1/8; 1.54M tets, 10 Newton iterations); without
+    #: the term the first step is a full one (1.7e-2 -> 8.7e-4) and the stage takes 6.
+    carried_curvature_tolerance: float = 1e-3
+    #: an attempt stops early, as failed, after this many Newton iterations in a row whose
+    #: line search accepted at most 1/64 of the step and that together lowered the residual
+    #: by less than 5 % (0: never). Where the load path folds, the 2D alpha 80 / beta 30
+    #: runs spent all 20 iterations on 0.1-0.4 % steps, attempt after attempt.
+    stagnation: int = 4
+    #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
+    #: after ``k`` iterations gives up (None: no such requirement)
+    required_progress: tuple[int, float] | None = None
+    #: the ``required_progress`` of each step of the stiffness-contrast path
+    #: (:mod:`brainbulge.solver.contrast`; the converged steps logged on the 100k- and
+    #: 1.40M-tet templates fell 40-18,000x, from 2e-3 to 3e-2 after 3 iterations)
+    contrast_progress: tuple[int, float] = (3, 0.1)
+    #: a Newton solve running longer than this [s] logs each iteration at INFO (else DEBUG),
+    #: so that a long fine-mesh solve shows its progress in the log
+    slow_newton_s: float = 30.0
+    #: the closed-form MINI residual and tangent where they apply
+    #: (:mod:`brainbulge.solver.fast.mini_tangent`, ``mini_plane``; False: NGSolve's, the
+    #: same to round-off, slower)
+    closed_form: bool = True
+    #: local solves at residual hotspots between Newton iterations (MINI, where it applies:
+    #: :mod:`brainbulge.solver.fast.hotspot`; False: the plain path)
+    hotspot_relaxation: bool = True
+
+    # --- the linear solver ---------------------------------------------------------------
+    #: "pardiso" (direct) or "krylov" (GMRES with AMG blocks, inexact Newton)
+    linear_solver: str = "pardiso"
+    #: loosest relative tolerance ``eta`` of an inexact Newton's Krylov solve [-]
+    #: (:func:`brainbulge.solver.inexact.forcing_term`)
+    eta_max: float = 1e-4
+    #: a failed Krylov solve is retried once, tighter, with a fresh preconditioner (False:
+    #: the Newton solve fails at once, e.g. from a start state that a ramp can replace)
+    retry_linear: bool = True
+    #: GMRES iterations per Krylov solve (None: the Krylov solver's default,
+    #: :class:`~brainbulge.solver.linear.krylov.BlockKrylovSolver`)
+    krylov_max_iterations: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
             raise InputError(f"steps = {self.steps!r} must be a positive integer")
         if not (0 < self.min_step <= 1):
             raise InputError(f"min_step = {self.min_step!r} must lie in (0, 1]")
-        if not self.tolerance > 0:
-            raise InputError(f"tolerance = {self.tolerance!r} must be positive")
+        for name in ("tolerance", "intermediate_tolerance", "carried_curvature_tolerance"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"{name} = {getattr(self, name)!r} must be positive")
         if not (0 <= self.start_load < 1):
             raise InputError(f"start_load = {self.start_load!r} must lie in [0, 1)")
+        if not isinstance(self.stagnation, int) or self.stagnation < 0:
+            raise InputError(f"stagnation = {self.stagnation!r} must be a non-negative "
+                             "integer (0: off)")
+        if not (ETA_MIN <= self.eta_max < 1):
+            raise InputError(f"eta_max = {self.eta_max!r} must lie in [{ETA_MIN:g}, 1)")
         if self.linear_solver not in LINEAR_SOLVERS:
             raise InputError(f"unknown linear solver {self.linear_solver!r}; choose one of "
                              f"{', '.join(LINEAR_SOLVERS)}")
@@ -101,15 +159,25 @@ class Failure:
     #: deformed position [length] of the vertex with the largest unbalanced force when the
     #: last Newton attempt gave up (None: its residual was not finite)
     site: np.ndarray | None = None
+    #: the last Newton attempt's scaled residual [-] and iterations when it gave up
+    residual: float = float("nan")
+    iterations: int = 0
+    #: why that attempt gave up (e.g. "stagnated: ...", "max_iterations = 20 reached")
+    reason: str = ""
 
     def describe(self, advice: str = DIVERGENCE_ADVICE) -> str:
         """One line for the user, ending in ``advice``."""
+        why = ""
+        if self.reason:
+            n = self.iterations
+            why = (f" (the last attempt: |R| = {self.residual:.2e} after {n} Newton "
+                   f"iteration{'' if n == 1 else 's'}, {self.reason})")
         where = ""
         if self.site is not None:
             at = ", ".join(f"{c:.4g}" for c in self.site)
             where = f"; the last attempt's largest unbalanced force was at ({at})"
         return (f"Newton diverged at load {self.load:.4f} of 1 (swelling ramp) even with a "
-                f"load step of {self.step:.2g}; the last converged state (load "
+                f"load step of {self.step:.2g}{why}; the last converged state (load "
                 f"{self.kept:.4f}) is kept{where}. {advice}")
 
 

@@ -1,14 +1,20 @@
 """The load ramp: the swelling ``Js(t) = 1 + t (Js - 1)`` raised step by step to ``t = 1``.
 
+:class:`NewtonSolver` owns the loop and calls Newton (:meth:`Newton.newton
+<brainbulge.solver.newton.Newton.newton>`, one nonlinear solve at a given load) at each load.
 Each load step raises the load factor by ``dt``, predicts the new state by extrapolating the
-last increment (``x = x_prev + dt / dt_last * (x_prev - x_before)``), and solves by Newton's
-method (:meth:`NewtonSolver.newton`); if that fails, once more from the last converged state.
-A step that still fails is cut in half and retried from the last converged state; a step
-that converged within 4 iterations lets the next grow by 1.5. The ramp stops with a
-:class:`Failure` when the step would fall below ``min_step``, and early when a stop hook of
-:class:`SolverOptions` says so. Below full load Newton converges only to
-:data:`INTERMEDIATE_TOLERANCE`. After every accepted step the state can go to a restart file
-(:mod:`brainbulge.solver.restart`), from which a stopped run resumes.
+last increment,
+
+    x_pred = x_prev + (dt / dt_last) (x_prev - x_before),
+
+and solves from it; if that fails, once more from the last converged state. A step that still
+fails is cut in half, ``dt <- dt / 2``, and retried from the last converged state; a step that
+converged within 4 iterations lets the next grow, ``dt <- 1.5 dt``. The ramp stops with a
+:class:`Failure` (the load, the step, the last Newton attempt's residual, iterations and
+reason, and where its force residual peaked) when the step would fall below ``min_step``, and
+early when a stop hook of :class:`SolverOptions` says so. Below full load Newton converges
+only to ``intermediate_tolerance``. After every accepted step the state can go to a restart
+file (:mod:`brainbulge.solver.restart`), from which a stopped run resumes.
 """
 
 from __future__ import annotations
@@ -16,163 +22,147 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Protocol
 
 import ngsolve as ngs
-import numpy as np
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
+from brainbulge.model.problem import Problem
 from brainbulge.solver import restart
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.newton import Newton
 from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
 
-
-class NewtonSolver(Protocol):
-    """What the ramp asks of a Newton solver (:class:`brainbulge.solver.newton.NewtonSolver`,
-    which runs its ramp through this module: the ramp sits below it)."""
-
-    form: MixedForm
-    opt: SolverOptions
-    tolerance: float
-    failure_site: np.ndarray | None
-
-    def newton(self, x: ngs.BaseVector, curvature_below: float = np.inf
-               ) -> tuple[bool, int, float]: ...
-
-    def max_penetration(self) -> float: ...
-
 log = logging.getLogger("brainbulge")
-
-#: Newton's tolerance below full load (never tighter than the final one). The material is
-#: hyperelastic, so an intermediate state is only the start of the next step (its
-#: extrapolation starts ~1e-3 away): converging it further than this buys nothing. Saves
-#: about one Newton iteration per intermediate load step (2D headline: 20 -> 18).
-INTERMEDIATE_TOLERANCE = 1e-6
-
-#: Newton from a state carried over from another mesh (:func:`equilibrate`, mesh
-#: sequencing) leaves the point contacts' curvature term out of the tangent until the scaled
-#: residual is at most this (a modified Newton method far from the solution, the exact
-#: tangent for the end game). At the carried-over state the flap rim's contact points press
-#: with up to ~350 kPa on the skull's convex rounded cut edge, where the term
-#: ``-A lambda grad^2 g`` makes sliding along the edge nearly free: the exact Newton direction
-#: slid points by 5-8 mm and folded elements (line-search steps of 1/8; 1.54M tets, 10 Newton
-#: iterations); without the term the first step is a full one (1.7e-2 -> 8.7e-4) and the
-#: stage takes 6.
-CARRIED_CURVATURE_TOLERANCE = 1e-3
 
 FULL = 1 - 1e-12  # a load at least this is full load
 
 
-def ramp_load(solver: NewtonSolver) -> Solution:
-    """Ramp the load from ``start_load`` (or a restart file's load) to 1; return the last
-    converged state (the form holds it, at its load)."""
-    check_feasible(solver)
-    form, opt = solver.form, solver.opt
-    start = time.perf_counter()
-    x = form.gfu.vec
-    sol = Solution(form=form, load=0.0, converged=False)
-    t, dt = opt.start_load, 1.0 / opt.steps
-    x_prev = x.CreateVector()
-    x_prev.data = x
-    last_increment: ngs.BaseVector | None = None
-    last_dt = 0.0
-    if opt.checkpoint is not None:
-        resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, form, sol)
-        if resumed is not None:
-            t, dt, last_increment, last_dt = resumed
-            sol.resumed_from = t
-            x_prev.data = x
-    bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
-    bar.update(round(100 * t))
-    try:
-        while t < FULL:
-            dt = min(dt, 1 - t)
-            form.set_load(t + dt)
-            lam_saved = form.multiplier_state()
-            if last_increment is not None:  # predictor: extrapolate the last increment
-                x.data = x_prev + (dt / last_dt) * last_increment
-                form.set_load(t + dt)  # exact prescribed values over the predictor
-            final = t + dt >= FULL
-            solver.tolerance = (opt.tolerance if final
-                                else max(opt.tolerance, INTERMEDIATE_TOLERANCE))
-            ok, its, norm = solver.newton(x)
-            if not ok and last_increment is not None:  # retry without the predictor
-                x.data = x_prev
-                ok, its2, norm = solver.newton(x)
-                its += its2
-            if not ok:
-                sol.rejected_steps += 1
-                x.data = x_prev
-                form.restore_multipliers(lam_saved)
-                if opt.stop_on_failure is not None and opt.stop_on_failure(t):
+class NewtonSolver(Newton):
+    """Newton's method (:class:`~brainbulge.solver.newton.Newton`) inside a load ramp, for a
+    :class:`MixedForm` and the :class:`SolverOptions` it is built with: :meth:`solve` ramps
+    the load to 1, :meth:`equilibrate` solves at the form's current load."""
+
+    def solve(self) -> Solution:
+        """Ramp the load from ``start_load`` (or a restart file's load) to 1; return the
+        last converged state (the form holds it, at its load)."""
+        check_feasible(self)
+        form, opt = self.form, self.opt
+        start = time.perf_counter()
+        x = form.gfu.vec
+        sol = Solution(form=form, load=0.0, converged=False)
+        t, dt = opt.start_load, 1.0 / opt.steps
+        x_prev = x.CreateVector()
+        x_prev.data = x
+        last_increment: ngs.BaseVector | None = None
+        last_dt = 0.0
+        if opt.checkpoint is not None:
+            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, form, sol)
+            if resumed is not None:
+                t, dt, last_increment, last_dt = resumed
+                sol.resumed_from = t
+                x_prev.data = x
+        bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
+        bar.update(round(100 * t))
+        try:
+            while t < FULL:
+                dt = min(dt, 1 - t)
+                form.set_load(t + dt)
+                lam_saved = form.multiplier_state()
+                if last_increment is not None:  # predictor: extrapolate the last increment
+                    x.data = x_prev + (dt / last_dt) * last_increment
+                    form.set_load(t + dt)  # exact prescribed values over the predictor
+                final = t + dt >= FULL
+                tol = (opt.tolerance if final
+                       else max(opt.tolerance, opt.intermediate_tolerance))
+                ok, its, norm = self.newton(x, tol)
+                last_its = its  # of the last attempt
+                if not ok and last_increment is not None:  # retry without the predictor
+                    x.data = x_prev
+                    ok, last_its, norm = self.newton(x, tol)
+                    its += last_its
+                if not ok:
+                    sol.rejected_steps += 1
+                    x.data = x_prev
+                    form.restore_multipliers(lam_saved)
+                    if opt.stop_on_failure is not None and opt.stop_on_failure(t):
+                        sol.stopped_early = True
+                        sol.note = f"stopped at load {t:.4f} (stop_on_failure)"
+                        break
+                    log.info("  load %.4f: not converged (|R| = %.2e, %s), cutting step",
+                             t + dt, norm, self.failure_reason)
+                    dt *= 0.5
+                    if dt < opt.min_step:
+                        sol.failure = Failure(load=t + 2 * dt, step=2 * dt, kept=t,
+                                              site=self.failure_site, residual=norm,
+                                              iterations=last_its,
+                                              reason=self.failure_reason)
+                        break
+                    continue
+                pen = self.max_penetration() if form.point_contacts else 0.0
+                increment = x.CreateVector()
+                increment.data = x - x_prev
+                last_increment, last_dt = increment, dt
+                x_prev.data = x
+                t += dt
+                bar.update(round(100 * t) - bar.n)
+                sol.steps.append(StepRecord(t, its, 0, norm, pen))
+                log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, norm)
+                if its <= 4:
+                    dt *= 1.5
+                if opt.checkpoint is not None:
+                    restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, x, t, dt,
+                                  last_increment, last_dt, sol)
+                if opt.stop_when is not None and t < FULL and opt.stop_when():
                     sol.stopped_early = True
-                    sol.note = f"stopped at load {t:.4f} (stop_on_failure)"
+                    sol.note = f"stopped at load {t:.4f} (stop_when)"
                     break
-                log.info("  load %.4f: not converged (|R| = %.2e), cutting step", t + dt, norm)
-                dt *= 0.5
-                if dt < opt.min_step:
-                    sol.failure = Failure(load=t + 2 * dt, step=2 * dt, kept=t,
-                                          site=solver.failure_site)
-                    break
-                continue
-            pen = solver.max_penetration() if form.point_contacts else 0.0
-            increment = x.CreateVector()
-            increment.data = x - x_prev
-            last_increment, last_dt = increment, dt
-            x_prev.data = x
-            t += dt
-            bar.update(round(100 * t) - bar.n)
+            else:
+                sol.converged = True
+        finally:
+            bar.close()
+            x.data = x_prev
+            form.load.Set(t)
+        sol.load = t
+        return finished(self, sol, start)
+
+    def equilibrate(self) -> Solution:
+        """Newton at the form's current load from its current state (one carried over
+        from another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's
+        solution), to the final tolerance, without load steps, the curvature term of the
+        contacts entering the tangent only below ``carried_curvature_tolerance``. On
+        failure the state is restored and ``converged`` is false."""
+        form = self.form
+        start = time.perf_counter()
+        t = float(form.load.Get())
+        sol = Solution(form=form, load=t, converged=False)
+        x = form.gfu.vec
+        x0 = x.CreateVector()
+        x0.data = x
+        lam0 = form.multiplier_state()
+        ok, its, norm = self.newton(x, curvature_below=self.opt.carried_curvature_tolerance)
+        if ok:
+            pen = self.max_penetration() if form.point_contacts else 0.0
             sol.steps.append(StepRecord(t, its, 0, norm, pen))
-            log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, norm)
-            if its <= 4:
-                dt *= 1.5
-            if opt.checkpoint is not None:
-                restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, x, t, dt,
-                              last_increment, last_dt, sol)
-            if opt.stop_when is not None and t < FULL and opt.stop_when():
-                sol.stopped_early = True
-                sol.note = f"stopped at load {t:.4f} (stop_when)"
-                break
-        else:
             sol.converged = True
-    finally:
-        bar.close()
-        solver.tolerance = opt.tolerance
-        x.data = x_prev
-        form.load.Set(t)
-    sol.load = t
-    return finished(solver, sol, start)
+        else:
+            x.data = x0
+            form.restore_multipliers(lam0)
+            sol.rejected_steps = 1
+            sol.note = (f"Newton did not converge at load {t:.4f} from the given state "
+                        f"(|R| = {norm:.2e} after {its} iterations: {self.failure_reason})")
+        return finished(self, sol, start)
 
 
-def equilibrate(solver: NewtonSolver,
-                curvature_below: float = CARRIED_CURVATURE_TOLERANCE) -> Solution:
-    """Newton at the form's current load from its current state (one carried over from
-    another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's solution), to the
-    final tolerance, without load steps, the curvature term of the contacts entering the
-    tangent only below ``curvature_below`` (default :data:`CARRIED_CURVATURE_TOLERANCE`;
-    ``inf``: always). On failure the state is restored and ``converged`` is false."""
-    form = solver.form
-    start = time.perf_counter()
-    t = float(form.load.Get())
-    sol = Solution(form=form, load=t, converged=False)
-    x = form.gfu.vec
-    x0 = x.CreateVector()
-    x0.data = x
-    lam0 = form.multiplier_state()
-    solver.tolerance = solver.opt.tolerance
-    ok, its, norm = solver.newton(x, curvature_below)
-    if ok:
-        pen = solver.max_penetration() if form.point_contacts else 0.0
-        sol.steps.append(StepRecord(t, its, 0, norm, pen))
-        sol.converged = True
-    else:
-        x.data = x0
-        form.restore_multipliers(lam0)
-        sol.rejected_steps = 1
-        sol.note = (f"Newton did not converge at load {t:.4f} from the given state "
-                    f"(|R| = {norm:.2e} after {its} iterations)")
-    return finished(solver, sol, start)
+def solve(
+    problem: Problem,
+    element: str = "taylor-hood",
+    options: SolverOptions | None = None,
+    compile_energy: bool = False,
+) -> Solution:
+    """Build the mixed form of ``problem`` and ramp the swelling to its target."""
+    form = MixedForm(problem, element=element, compile_energy=compile_energy)
+    return NewtonSolver(form, options).solve()
 
 
 def check_feasible(solver: NewtonSolver) -> None:

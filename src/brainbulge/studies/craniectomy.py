@@ -73,7 +73,6 @@ from brainbulge.results.sections import plot_sections, section_centre_mm
 from brainbulge.results.summary import PointFields, point_fields, solution_summary
 from brainbulge.results.views3d import write_surface_views
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
-from brainbulge.solver.ramp import equilibrate
 from brainbulge.solver.remesh.sequencing import solve_sequenced
 
 log = logging.getLogger("brainbulge")
@@ -175,12 +174,11 @@ def solve_brain(
         del coarse
     else:
         if start is not None and not restart.is_file() and start(form):
+            # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
             solver = NewtonSolver(form, dataclasses.replace(
-                options, max_iterations=START_MAX_ITERATIONS))
-            if solver.inexact:  # a start whose tangent GMRES cannot solve: ramp at once
-                solver.retry_linear = False
-                solver.linear.maxiter = START_KRYLOV_ITERATIONS
-            sol = equilibrate(solver, curvature_below=np.inf)
+                options, max_iterations=START_MAX_ITERATIONS, carried_curvature_tolerance=np.inf,
+                retry_linear=False, krylov_max_iterations=START_KRYLOV_ITERATIONS))
+            sol = solver.equilibrate()
             started = sol.converged
             if not sol.converged:
                 log.info("  no convergence from the start state (%s): ramping the load",

@@ -3,8 +3,7 @@ of contact_cases."""
 
 from __future__ import annotations
 
-from brainbulge.solver import SolverOptions
-from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver import NewtonSolver, SolverOptions
 from contact_cases import _forms
 
 OPTIONS = SolverOptions(steps=2)

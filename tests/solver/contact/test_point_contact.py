@@ -19,9 +19,8 @@ from brainbulge.errors import InfeasibleError
 from brainbulge.geometry.sphere_skull import SphericalSkull
 from brainbulge.model import Problem
 from brainbulge.model.problem import Contact
-from brainbulge.solver import SolverOptions
+from brainbulge.solver import NewtonSolver, SolverOptions
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver
 from conftest import unit_box_mesh
 from contact_cases import GRAY, JS, A, _capped_ball
 

@@ -41,9 +41,9 @@ class LinearSolver(Protocol):
         ...
 
 
-def make_linear_solver(name: str = "pardiso", form=None) -> LinearSolver:
+def make_linear_solver(name: str = "pardiso", form=None, **krylov) -> LinearSolver:
     """``"pardiso"`` (direct, default) or ``"krylov"`` (GMRES preconditioned by blocks
-    built from ``form``'s spaces)."""
+    built from ``form``'s spaces; ``krylov``: its keyword arguments, e.g. ``maxiter``)."""
     if name == "pardiso":
         from brainbulge.solver.linear.direct import PardisoSolver
 
@@ -51,5 +51,5 @@ def make_linear_solver(name: str = "pardiso", form=None) -> LinearSolver:
     if name == "krylov":
         from brainbulge.solver.linear.krylov import BlockKrylovSolver
 
-        return BlockKrylovSolver.from_form(form)
+        return BlockKrylovSolver.from_form(form, **krylov)
     raise InputError(f"unknown linear solver {name!r}; choose 'pardiso' or 'krylov'")

@@ -37,8 +37,9 @@ from brainbulge.geometry.rezone import (
 from brainbulge.model.problem import Problem
 from brainbulge.solver.contact.points import edge_bubble_midpoint_value
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver
+from brainbulge.solver.newton import Newton
 from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.ramp import NewtonSolver
 from brainbulge.solver.remesh.sequencing import carry_contact_pressures
 
 log = logging.getLogger("brainbulge")
@@ -84,7 +85,6 @@ def solve_with_rezoning(
     form = MixedForm(problem, element=element)
     total: Solution | None = None
     t, rezones = options.start_load, 0
-    solver = NewtonSolver(form, options)
     failed = ""  # why the last rezoning failed: then the ramp goes on without it
     while True:
         def degenerate(f: MixedForm = form) -> bool:
@@ -94,8 +94,8 @@ def solve_with_rezoning(
             return t_now > t_mesh + 1e-9  # a failure on a mesh that has deformed since
 
         hooks = {} if failed else {"stop_when": degenerate, "stop_on_failure": moved}
-        solver.opt = dataclasses.replace(options, start_load=t, **hooks)
-        solver.t_assembly = solver.t_solve = 0.0  # per segment, summed by _merged
+        # a solver per segment (its times too: summed by _merged)
+        solver = NewtonSolver(form, dataclasses.replace(options, start_load=t, **hooks))
         sol = solver.solve()
         total = sol if total is None else _merged(total, sol)
         if sol.converged or rezones >= rezoning.max_rezones:
@@ -109,8 +109,7 @@ def solve_with_rezoning(
                         rezoning.corners, rezoning.rim_points, rezoning.h_rim)
             new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
             transfer_state(form, new, rz)
-            # (the ramp on the new mesh gets ``options`` back at the top of the loop)
-            new_solver = NewtonSolver(
+            new_solver = Newton(
                 new, dataclasses.replace(options, max_iterations=EQUILIBRATION_ITERATIONS))
             new.set_load(sol.load)
             # equilibrate the carried-over state on the new mesh before the ramp goes on
@@ -120,14 +119,15 @@ def solve_with_rezoning(
                      sol.load, r0, norm, its)
             if not ok:
                 raise ConvergenceError(f"the carried-over state did not equilibrate "
-                                       f"(|R| = {norm:.2e})")
+                                       f"(|R| = {norm:.2e} after {its} iterations: "
+                                       f"{new_solver.failure_reason})")
         except (ConvergenceError, RuntimeError, NgException) as exc:
             # the old mesh keeps the last converged state; go on there without rezoning
             failed = f"rezoning at load {sol.load:.4f} failed: {exc}"
             log.warning("  %s; going on without rezoning", failed)
             t = sol.load
             continue
-        form, solver, t = new, new_solver, sol.load
+        form, t = new, sol.load
         total.steps[-1].newton_iterations += its
         rezones += 1
     total.form = form

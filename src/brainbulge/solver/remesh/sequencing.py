@@ -56,8 +56,8 @@ from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordina
 from brainbulge.geometry.rezone import vertex_values
 from brainbulge.solver.contrast import equilibrate_through_contrast
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import NewtonSolver
 from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.ramp import NewtonSolver
 
 log = logging.getLogger("brainbulge")
 
