@@ -26,11 +26,21 @@ beta 60. Formulations compared for sliding contact (``--variants``):
   (C1), ``edge-hermite`` against cubic Hermite segments through the vertices (C1
   positions, closest-point projection). No rezoning, no hotspot relaxation.
 
-3D (``--3d``): the six craniectomy scenarios on the demo's brain (``brainbulge study
-craniectomy --tets 30000``: Netgen gives 21k tets).
+3D rows (:mod:`bench_hard_cases_3d`; with any of them the 2D cases run only if ``--cases``
+names some): ``--3d``, the six craniectomy scenarios on the demo's 21k-tet brain;
+``--flap``, the planner's 80 mm flap at its one-centre placement on the 111k-tet template;
+``--edge-radius``, a 2 mm edge at 111k tets, load ramped and mesh-sequenced from 20k tets
+without the contrast path; ``--taylor-hood``, the six scenarios with Taylor-Hood at 21k tets
+(``--th-scenarios`` picks some); ``--long``, Taylor-Hood at 175k tets and the default
+scenario mesh-sequenced at 1.40M tets (hours). They print converged, load, Newton (and
+the coarse stage's) and GMRES iterations, the final scaled residual, solve and run time,
+peak memory, bulge volume, Monro shift and (planner) strained volume.
 
-Rerun with ``python benchmarks/bench_hard_cases.py`` (about 20 min on 2 cores; add ``--3d``
-for the six brain scenarios, about 2 min more). Each row runs in its own process.
+Rerun with ``python benchmarks/bench_hard_cases.py`` (the 2D rows, about 20 min on 2
+cores); ``--3d`` about 2 min; ``--flap`` TIMES_FLAP; ``--edge-radius`` TIMES_EDGE;
+``--taylor-hood --th-scenarios left-flap_both-swelling`` TIMES_TH (measured beside other
+work; ``--cache DIR`` keeps the meshes, built once, ``--keep DIR`` the runs' outputs). Each
+row runs in its own process, with ``OMP_NUM_THREADS=1`` unless set.
 """
 
 from __future__ import annotations

@@ -21,9 +21,11 @@ Cases (``RUNS``; each a flag of ``bench_hard_cases.py``):
   1.40M-tet mesh, mesh-sequenced from its nested 181k-tet Netgen mesh. Hours; not measured
   by default.
 
-Every row is parsed from the run's ``summary.json``; peak memory from ``/usr/bin/time``
-where present. The meshes are built once by ``brainbulge mesh`` into ``--cache``.
-Threads: ``OMP_NUM_THREADS=1`` unless set.
+Every row is parsed from the run's ``summary.json`` (a failed Newton solve from a given
+state: its iterations and residual from the summary's message); "run s" and the peak memory
+(from ``/usr/bin/time`` where present) are the whole process's (for ``study``: all six
+scenarios). The meshes are built once by ``brainbulge mesh`` into ``--cache``. Threads:
+``OMP_NUM_THREADS=1`` unless set.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import time
@@ -46,6 +49,9 @@ DEMO_TETS, PLAN_TETS, COARSE_TETS = 30_000, 100_000, 25_000
 SMALL_EDGE_MM = 2.0
 #: GNU time, for the peak memory
 TIMER = "/usr/bin/time"
+#: a Newton solve that failed from a given state, as its message says (its iterations are in no
+#: load-step record)
+STALLED = re.compile(r"\|R\| = ([0-9.eE+-]+) after (\d+) iterations")
 SCENARIO_NAMES = tuple(f"{flap}-flap_{swell}-swelling" for flap, swell in SCENARIOS)
 
 
@@ -138,14 +144,19 @@ def command(run: Run3D, out: Path, cache: Path) -> list[str]:
 
 
 def row_from_summary(s: dict, case: str, variant: str) -> dict:
-    """A table row from a run's ``summary.json``: Krylov iterations only with GMRES."""
+    """A table row from a run's ``summary.json``: Krylov iterations only with GMRES; a
+    failed Newton solve from a given state (no load step recorded) from its message."""
     inputs = s.get("inputs") or {}
+    newton, residual = s.get("newton_iterations"), s.get("final_residual")
+    stalled = STALLED.search(s.get("message") or "")
+    if not s.get("converged", True) and not s.get("load_steps") and stalled:
+        newton, residual = int(stalled[2]), float(stalled[1])
     krylov = inputs.get("linear_solver") == "krylov" or bool(s.get("linear_iterations"))
     seq = s.get("mesh_sequencing") or {}
     return {"case": case, "variant": variant, "converged": bool(s.get("converged", True)),
-            "load": s.get("load_reached", 1.0), "newton": s.get("newton_iterations"),
+            "load": s.get("load_reached", 1.0), "newton": newton,
             "gmres": s.get("linear_iterations") if krylov else None,
-            "residual": s.get("final_residual"), "solve_s": s.get("wall_time_s"),
+            "residual": residual, "solve_s": s.get("wall_time_s"),
             "tets": s.get("elements"), "bulge_ml": s.get("bulge_volume_ml"),
             "monro_mm": s.get("midline_shift_mm"),
             "strained_ml": s.get("strained_volume_ml"),

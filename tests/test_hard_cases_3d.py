@@ -80,3 +80,16 @@ def test_without_contrast_path_the_fine_stage_is_one_step_on_the_model(monkeypat
     h3.without_contrast_path()
     assert contrast.contrast_path(materials) == [pytest.approx(20.0)]
     assert issubclass(sequencing.NewtonSolver, contrast.NewtonSolver)
+
+
+def test_a_fine_stage_that_stalled_reports_its_iterations_and_residual_from_its_message():
+    """A failed Newton solve from a carried-over state leaves no load-step record: its
+    iterations and last residual are those its message gives."""
+    s = {"converged": False, "load_reached": 1.0, "load_steps": 0, "newton_iterations": 0,
+         "final_residual": None, "linear_iterations": 1292,
+         "message": "Newton did not converge at load 1.0000 from the given state (|R| = "
+                    "3.09e-05 after 14 iterations) (contrast path stopped at 20 of 20)"}
+    row = h3.row_from_summary(s, "edge-2mm", "sequenced-no-contrast")
+    assert (row["newton"], row["residual"], row["gmres"]) == (14, 3.09e-5, 1292)
+    converged = {**s, "converged": True, "load_steps": 3, "newton_iterations": 13}
+    assert h3.row_from_summary(converged, "c", "v")["newton"] == 13
