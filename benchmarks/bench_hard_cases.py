@@ -37,9 +37,10 @@ the coarse stage's) and GMRES iterations, the final scaled residual, solve and r
 peak memory, bulge volume, Monro shift and (planner) strained volume.
 
 Rerun with ``python benchmarks/bench_hard_cases.py`` (the 2D rows, about 20 min on 2
-cores); ``--3d`` about 2 min; ``--flap`` TIMES_FLAP; ``--edge-radius`` TIMES_EDGE;
+cores); ``--3d`` about 2 min; ``--flap`` about 9 min; ``--edge-radius`` about 12 min;
 ``--taylor-hood --th-scenarios left-flap_both-swelling`` TIMES_TH (measured beside other
-work; ``--cache DIR`` keeps the meshes, built once, ``--keep DIR`` the runs' outputs). Each
+work, about 2x the times alone; building the 111k- and 20k-tet meshes adds about 5 min
+once: ``--cache DIR`` keeps them; ``--keep DIR`` keeps the runs' outputs). Each
 row runs in its own process, with ``OMP_NUM_THREADS=1`` unless set.
 """
 
