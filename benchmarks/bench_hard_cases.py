@@ -264,6 +264,8 @@ def parser() -> argparse.ArgumentParser:
                     help="folder of the 3D rows' meshes, kept (default: a temporary one)")
     ap.add_argument("--keep", type=Path, default=None,
                     help="folder for the 3D runs' outputs, kept (default: temporary)")
+    ap.add_argument("--time-limit", type=float, default=None, metavar="S",
+                    help="stop each 3D run after S seconds (SIGTERM) and report its log")
     ap.add_argument("--one", nargs=4, help=argparse.SUPPRESS)  # ALPHA BETA CONTACT VARIANT
     return ap
 
@@ -311,7 +313,7 @@ def main() -> None:
             folder = keep / f"{run.case}_{run.variant}".replace(" ", "-")
             folder.parent.mkdir(parents=True, exist_ok=True)
             cache.mkdir(parents=True, exist_ok=True)
-            for r in h3.run_3d(run, folder, cache):
+            for r in h3.run_3d(run, folder, cache, args.time_limit):
                 print(h3.format_row(r), flush=True)
 
 

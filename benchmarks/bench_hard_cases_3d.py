@@ -35,6 +35,7 @@ import json
 import math
 import os
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -52,6 +53,9 @@ TIMER = "/usr/bin/time"
 #: a Newton solve that failed from a given state, as its message says (its iterations are in no
 #: load-step record)
 STALLED = re.compile(r"\|R\| = ([0-9.eE+-]+) after (\d+) iterations")
+#: a load step accepted, and a scaled residual, in ``brainbulge.log``
+ACCEPTED = re.compile(r"load ([0-9.]+): (\d+) Newton iterations")
+RESIDUAL = re.compile(r"\|R\| = ([0-9.eE+-]+)")
 SCENARIO_NAMES = tuple(f"{flap}-flap_{swell}-swelling" for flap, swell in SCENARIOS)
 
 
@@ -171,16 +175,36 @@ def peak_mb(time_output: str) -> float | None:
     return None
 
 
-def run_3d(run: Run3D, out: Path, cache: Path) -> list[dict]:
-    """Run ``run`` into ``out`` and return its rows (one per summary; an error row when
-    there is none)."""
+def row_from_log(text: str, case: str, variant: str) -> dict:
+    """A row from the ``brainbulge.log`` of a run stopped before its summary: the last
+    accepted load, the Newton iterations of the accepted load steps, the last scaled
+    residual logged."""
+    accepted = ACCEPTED.findall(text)
+    residuals = RESIDUAL.findall(text)
+    return {"case": case, "variant": variant, "converged": "stopped",
+            "load": float(accepted[-1][0]) if accepted else 0.0,
+            "newton": sum(int(n) for _, n in accepted), "gmres": None,
+            "residual": float(residuals[-1]) if residuals else None, "solve_s": None,
+            "tets": None, "bulge_ml": None, "monro_mm": None, "strained_ml": None}
+
+
+def run_3d(run: Run3D, out: Path, cache: Path, time_limit: float | None = None
+           ) -> list[dict]:
+    """Run ``run`` into ``out`` and return its rows: one per summary; stopped (SIGTERM)
+    after ``time_limit`` [s], one per log; an error row when there is neither."""
     argv = command(run, out, cache)
     timer = Path(TIMER).is_file()
     report = out.parent / f"{out.name}.time"
     if timer:
         argv = [TIMER, "-v", "-o", str(report), *argv]
     t0 = time.perf_counter()
-    done = subprocess.run(argv, capture_output=True, text=True, env=child_env())
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=child_env(), start_new_session=True)
+    try:
+        _, err = proc.communicate(timeout=time_limit)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGTERM)  # the run's own group: the timer and brainbulge
+        _, err = proc.communicate()
     wall = time.perf_counter() - t0
     peak = peak_mb(report.read_text()) if timer and report.is_file() else None
     rows = []
@@ -189,8 +213,13 @@ def run_3d(run: Run3D, out: Path, cache: Path) -> list[dict]:
         rows.append({**row_from_summary(json.loads(path.read_text()), case, run.variant),
                      "run_s": wall, "peak_mb": peak})
     if not rows:
-        err = (done.stderr.strip().splitlines() or ["no output"])[-1]
-        rows.append({"case": run.case, "variant": run.variant, "error": err, "run_s": wall})
+        for path in sorted(out.glob(run.summaries.replace("summary.json", "brainbulge.log"))):
+            case = run.case if run.case != "study" else path.parent.name
+            rows.append({**row_from_log(path.read_text(), case, run.variant),
+                         "run_s": wall, "peak_mb": peak})
+    if not rows:
+        last = (err.strip().splitlines() or ["no output"])[-1]
+        rows.append({"case": run.case, "variant": run.variant, "error": last, "run_s": wall})
     return rows
 
 
@@ -207,12 +236,12 @@ def format_row(r: dict) -> str:
     """A markdown row of :data:`HEADER`."""
     if "error" in r:
         return f"| {r['case']} | {r['variant']} | error: {r['error']} | {r['run_s']:.0f} s |"
-    newton = _num(r["newton"], "d")
+    newton = _num(r["newton"], "d") + ("+" if r["converged"] == "stopped" else "")
     if r.get("coarse_newton") is not None:
         newton += f" (+{r['coarse_newton']} coarse)"
     return (f"| {r['case']} | {r['variant']} | {_num(r['tets'], ',')} | {r['converged']} | "
             f"{r['load']:.3f} | {newton} | {_num(r['gmres'], ',')} | "
-            f"{_num(r['residual'], '.2g')} | {_num(r['solve_s'], '.0f')} | "
+            f"{_num(r['residual'], '.1e')} | {_num(r['solve_s'], '.0f')} | "
             f"{r['run_s']:.0f} | {_num(r['peak_mb'], ',.0f')} | "
             f"{_num(r['bulge_ml'], '.1f')} | {_num(r['monro_mm'], '+.2f')} | "
             f"{_num(r['strained_ml'], '.1f')} |")

@@ -93,3 +93,17 @@ def test_a_fine_stage_that_stalled_reports_its_iterations_and_residual_from_its_
     assert (row["newton"], row["residual"], row["gmres"]) == (14, 3.09e-5, 1292)
     converged = {**s, "converged": True, "load_steps": 3, "newton_iterations": 13}
     assert h3.row_from_summary(converged, "c", "v")["newton"] == 13
+
+
+def test_a_stopped_run_reports_its_accepted_load_steps_and_last_residual_from_its_log():
+    log = """2026-12-06 22:34:22,301 INFO     newton 4: |R| = 7.993e-07 (564 s)
+2026-12-06 22:34:22,512 INFO   load 0.2500: 4 Newton iterations, |R| = 7.99e-07
+2026-12-06 22:44:43,089 INFO   load 0.6250: not converged (|R| = 1.76e-05), cutting step
+2026-12-06 22:46:54,634 INFO   load 0.4375: 3 Newton iterations, |R| = 1.68e-07
+2026-12-06 22:50:06,353 INFO     newton 2: |R| = 1.476e-04 (191 s)
+"""
+    row = h3.row_from_log(log, "taylor-hood", "left-flap_both-swelling")
+    assert (row["load"], row["newton"], row["residual"]) == (0.4375, 7, 1.476e-4)
+    text = h3.format_row({**row, "run_s": 3000.0, "peak_mb": None})
+    assert "| stopped | 0.438 | 7+ | - | 1.5e-04 |" in text
+    assert h3.row_from_log("", "c", "v")["load"] == 0.0
