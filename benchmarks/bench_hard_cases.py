@@ -38,8 +38,9 @@ peak memory, bulge volume, Monro shift and (planner) strained volume.
 
 Rerun with ``python benchmarks/bench_hard_cases.py`` (the 2D rows, about 20 min on 2
 cores); ``--3d`` about 2 min; ``--flap`` about 9 min; ``--edge-radius`` about 12 min;
-``--taylor-hood --th-scenarios left-flap_both-swelling`` TIMES_TH (measured beside other
-work, about 2x the times alone; building the 111k- and 20k-tet meshes adds about 5 min
+``--taylor-hood --th-scenarios left-flap_both-swelling`` over 70 min per scenario,
+stalling (``--time-limit S`` stops each run and reports its log) (measured beside other
+work, 2-3x the times alone; building the 111k- and 20k-tet meshes adds about 5 min
 once: ``--cache DIR`` keeps them; ``--keep DIR`` keeps the runs' outputs). Each
 row runs in its own process, with ``OMP_NUM_THREADS=1`` unless set.
 """
