@@ -38,11 +38,23 @@ parameter ``xi`` of their projections on their segments, and the solution's asym
 largest difference of ``u_y`` between mirrored vertices, relative to the largest ``|u|``
 (``asymmetry_far``: outside the edge-exclusion disks around the edges).
 
-3D (``--3d``): the six craniectomy scenarios on the demo's brain (``brainbulge study
-craniectomy --tets 30000``: Netgen gives 21k tets).
+3D rows (:mod:`bench_hard_cases_3d`; with any of them the 2D cases run only if ``--cases``
+names some): ``--3d``, the six craniectomy scenarios on the demo's 21k-tet brain;
+``--flap``, the planner's 80 mm flap at its one-centre placement on the 111k-tet template;
+``--edge-radius``, a 2 mm edge at 111k tets, load ramped and mesh-sequenced from 20k tets
+without the contrast path; ``--taylor-hood``, the six scenarios with Taylor-Hood at 21k tets
+(``--th-scenarios`` picks some); ``--long``, Taylor-Hood at 175k tets and the default
+scenario mesh-sequenced at 1.40M tets (hours). They print converged, load, Newton (and
+the coarse stage's) and GMRES iterations, the final scaled residual, solve and run time,
+peak memory, bulge volume, Monro shift and (planner) strained volume.
 
-Rerun with ``python benchmarks/bench_hard_cases.py`` (about 25 min on 2 cores; add ``--3d``
-for the six brain scenarios, about 2 min more). Each row runs in its own process.
+Rerun with ``python benchmarks/bench_hard_cases.py`` (the 2D rows, about 25 min on 2
+cores); ``--3d`` about 2 min; ``--flap`` about 9 min; ``--edge-radius`` about 12 min;
+``--taylor-hood --th-scenarios left-flap_both-swelling`` over 70 min per scenario,
+stalling (``--time-limit S`` stops each run and reports its log) (measured beside other
+work, 2-3x the times alone; building the 111k- and 20k-tet meshes adds about 5 min
+once: ``--cache DIR`` keeps them; ``--keep DIR`` keeps the runs' outputs). Each
+row runs in its own process, with ``OMP_NUM_THREADS=1`` unless set.
 """
 
 from __future__ import annotations
@@ -58,11 +70,16 @@ from pathlib import Path
 
 import numpy as np
 
+import bench_hard_cases_3d as h3
+
 CASES_2D = {
     "a80b30": (80.0, 30.0),
     "a60b30": (60.0, 30.0),
     "a80b60": (80.0, 60.0),
 }
+#: 3D case (:data:`bench_hard_cases_3d.RUNS`) -> the flag's attribute that selects it
+THREE_D_FLAGS = {"study": "three_d", "flap": "flap", "edge-radius": "edge_radius",
+                 "taylor-hood": "taylor_hood", "long": "long"}
 VARIANTS = ("production", "released", "released-per-solve", "released-opening", "edge",
             "edge-smooth", "edge-hermite", "edge-offset", "edge-vertex", "edge-vertex-offset")
 #: how far the ``-offset`` meshes move the opening's break points into the opening, in
@@ -281,27 +298,18 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str,
     return row
 
 
-def run_3d(out: Path) -> list[dict]:
-    folder = out / "craniectomy"
-    t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "brainbulge", "study", "craniectomy", "--tets",
-                    "30000", "--workers", "1", "--out", str(folder), "--overwrite"],
-                   capture_output=True)
-    wall = time.perf_counter() - t0
-    rows = []
-    for path in sorted(folder.glob("*/summary.json")):
-        s = json.loads(path.read_text())
-        rows.append({"case": path.parent.name, "converged": s.get("converged", True),
-                     "load": s.get("load_reached", 1.0), "newton": s.get("newton_iterations"),
-                     "solve_s": s.get("wall_time_s"), "bulge_ml": s.get("bulge_volume_ml"),
-                     "monro_mm": s.get("monro_shift_mm", s.get("midline_shift_mm"))})
-    print(f"\n3D study wall time {wall:.0f} s")
-    return rows
+def selected(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+    """The 2D cases and the 3D cases (keys of :data:`bench_hard_cases_3d.RUNS`) that the
+    flags select: the 2D cases run when asked for (``--cases``) or when no 3D case is."""
+    three = [case for case, flag in THREE_D_FLAGS.items() if getattr(args, flag)]
+    two = args.cases if args.cases is not None else ([] if three else list(CASES_2D))
+    return two, three
 
 
-def main() -> None:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", nargs="+", default=list(CASES_2D), choices=list(CASES_2D))
+    ap.add_argument("--cases", nargs="+", default=None, choices=list(CASES_2D),
+                    help="2D cases (default: all, unless a 3D case is asked for)")
     ap.add_argument("--contacts", nargs="+", default=["sliding", "noslip"])
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     ap.add_argument("--3d", dest="three_d", action="store_true", help="the six 3D scenarios")
@@ -309,17 +317,38 @@ def main() -> None:
                     help="Newton's tolerance on the scaled residual (the variants)")
     ap.add_argument("--blend", type=float, default=None,
                     help="the edge-vertex variants' blend (parameter distance from a vertex)")
+    ap.add_argument("--flap", action="store_true", help="the planner's 80 mm flap, 111k tets")
+    ap.add_argument("--edge-radius", action="store_true",
+                    help="a 2 mm edge at 111k tets: ramped, and sequenced without contrast path")
+    ap.add_argument("--taylor-hood", action="store_true",
+                    help="the six scenarios with Taylor-Hood at 21k tets")
+    ap.add_argument("--th-scenarios", nargs="+", default=list(h3.SCENARIO_NAMES),
+                    choices=h3.SCENARIO_NAMES, help="the Taylor-Hood rows' scenarios")
+    ap.add_argument("--long", action="store_true",
+                    help="Taylor-Hood at 175k and the 1.40M-tet sequenced default (hours)")
+    ap.add_argument("--cache", type=Path, default=None,
+                    help="folder of the 3D rows' meshes, kept (default: a temporary one)")
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="folder for the 3D runs' outputs, kept (default: temporary)")
+    ap.add_argument("--time-limit", type=float, default=None, metavar="S",
+                    help="stop each 3D run after S seconds (SIGTERM) and report its log")
     ap.add_argument("--one", nargs=4, help=argparse.SUPPRESS)  # ALPHA BETA CONTACT VARIANT
-    args = ap.parse_args()
+    return ap
+
+
+def main() -> None:
+    args = parser().parse_args()
     if args.one:
         alpha, beta, contact, variant = args.one
         print(json.dumps(run_2d_variant(float(alpha), float(beta), contact, variant,
                                         args.tolerance, args.blend)))
         return
-    print("| case | contact | formulation | converged | load | Newton | rejected | rezones "
-          "| solve s | max u_y |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for name in args.cases:
+    cases_2d, cases_3d = selected(args)
+    if cases_2d:
+        print("| case | contact | formulation | converged | load | Newton | rejected | "
+              "rezones | solve s | max u_y |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in cases_2d:
         alpha, beta = CASES_2D[name]
         for contact in args.contacts:
             for variant in args.variants:
@@ -344,14 +373,17 @@ def main() -> None:
                       f"{row['load']:.3f} | {row['newton']} | {row['rejected']} | "
                       f"{row['rezones']} | {row['solve_s']:.1f} | "
                       f"{'-' if top is None else f'{top:.4f}'} |", flush=True)
-    if args.three_d:
-        with tempfile.TemporaryDirectory() as tmp:
-            rows = run_3d(Path(tmp))
-        print("| scenario | converged | load | Newton | solve s | bulge ml | Monro mm |")
-        print("|---|---|---|---|---|---|---|")
-        for r in rows:
-            print(f"| {r['case']} | {r['converged']} | {r['load']:.3f} | {r['newton']} | "
-                  f"{r['solve_s']:.1f} | {r['bulge_ml']:.1f} | {r['monro_mm']:+.2f} |")
+    if not cases_3d:
+        return
+    print(f"\n{h3.HEADER}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        cache, keep = args.cache or Path(tmp) / "meshes", args.keep or Path(tmp) / "runs"
+        for run in h3.runs_for(cases_3d, args.th_scenarios):
+            folder = keep / f"{run.case}_{run.variant}".replace(" ", "-")
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            cache.mkdir(parents=True, exist_ok=True)
+            for r in h3.run_3d(run, folder, cache, args.time_limit):
+                print(h3.format_row(r), flush=True)
 
 
 if __name__ == "__main__":

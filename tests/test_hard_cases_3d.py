@@ -1,0 +1,109 @@
+"""The hard-case benchmark's 3D rows: which runs its flags select, their command lines, and
+the rows read from a run's summary (no solve here)."""
+
+import math
+from types import SimpleNamespace
+
+import pytest
+
+import bench_hard_cases_3d as h3
+from bench_hard_cases import parser, selected
+
+
+@pytest.mark.parametrize(("flags", "two", "three"), [
+    ([], ["a80b30", "a60b30", "a80b60"], []),
+    (["--flap"], [], ["flap"]),
+    (["--edge-radius", "--taylor-hood", "--long"], [], ["edge-radius", "taylor-hood", "long"]),
+    (["--3d", "--cases", "a60b30"], ["a60b30"], ["study"]),
+])
+def test_flags_select_the_2d_cases_only_without_a_3d_case_unless_named(flags, two, three):
+    assert selected(parser().parse_args(flags)) == (two, three)
+
+
+def test_taylor_hood_runs_are_the_chosen_scenarios_on_the_demo_mesh():
+    runs = h3.runs_for(["taylor-hood"], ["frontal-flap_right-swelling"])
+    assert len(runs) == 1 and runs[0].meshes() == [h3.DEMO_TETS]
+    argv = " ".join(runs[0].argv)
+    assert "--element taylor-hood --flap frontal --swell right --steps 4" in argv
+    assert len(h3.runs_for(["taylor-hood"])) == 6
+
+
+def test_command_resolves_the_cached_meshes_and_the_output_folder(tmp_path):
+    """With the meshes in the cache nothing is built: the placeholders become their paths,
+    and the sequenced run without contrast path goes through this module."""
+    for n in (h3.PLAN_TETS, h3.COARSE_TETS):
+        (tmp_path / f"mesh_{n}").mkdir()
+        (tmp_path / f"mesh_{n}" / "brain.npz").write_bytes(b"")
+    ramped, sequenced = h3.runs_for(["edge-radius"])
+    argv = h3.command(sequenced, tmp_path / "out", tmp_path)
+    assert argv[1:3] == [h3.__file__, "--no-contrast"]
+    assert argv[argv.index("--mesh") + 1] == str(tmp_path / "mesh_100000" / "brain.npz")
+    assert argv[argv.index("--coarse-mesh") + 1] == str(tmp_path / "mesh_25000" / "brain.npz")
+    assert argv[argv.index("--out") + 1] == str(tmp_path / "out")
+    assert "--coarse-mesh" not in h3.command(ramped, tmp_path / "o", tmp_path)
+    assert "{" not in " ".join(h3.command(h3.runs_for(["flap"])[0], tmp_path / "o", tmp_path))
+
+
+def test_rows_report_gmres_only_for_krylov_runs_and_the_coarse_stage():
+    s = {"converged": False, "load_reached": 1.0, "newton_iterations": 9,
+         "linear_iterations": 0, "final_residual": 1.55e-5, "wall_time_s": 99.0,
+         "elements": 110937, "bulge_volume_ml": 57.7, "midline_shift_mm": -2.96,
+         "inputs": {"linear_solver": "pardiso"},
+         "mesh_sequencing": {"coarse_newton_iterations": 6}}
+    row = h3.row_from_summary(s, "edge-2mm", "sequenced")
+    assert row["gmres"] is None and row["coarse_newton"] == 6
+    text = h3.format_row({**row, "run_s": 120.0, "peak_mb": None})
+    assert "| 110,937 | False | 1.000 | 9 (+6 coarse) | - | 1.6e-05 | 99 | 120 | - |" in text
+    row = h3.row_from_summary({**s, "linear_iterations": 786, "midline_shift_mm": math.nan,
+                               "inputs": {"linear_solver": "krylov"}}, "c", "v")
+    assert row["gmres"] == 786
+    assert "| 786 |" in h3.format_row({**row, "run_s": 1.0, "peak_mb": 2190.0})
+    assert "| 57.7 | - | - |" in h3.format_row({**row, "run_s": 1.0, "peak_mb": 2190.0})
+
+
+def test_peak_memory_is_read_from_gnu_time():
+    report = "\tUser time (seconds): 1.0\n\tMaximum resident set size (kbytes): 2097152\n"
+    assert h3.peak_mb(report) == 2048.0
+    assert h3.peak_mb("Command exited with non-zero status 4\n") is None
+
+
+def test_without_contrast_path_the_fine_stage_is_one_step_on_the_model(monkeypatch):
+    from brainbulge.solver import contrast
+    from brainbulge.solver.remesh import sequencing
+
+    for module, name in ((contrast, "CONTRAST_START"), (sequencing, "NewtonSolver"),
+                         (sequencing, "equilibrate_through_contrast")):
+        monkeypatch.setattr(module, name, getattr(module, name))  # restored afterwards
+    materials = {r: SimpleNamespace(shear_modulus=mu)
+                 for r, mu in (("white", 666.0), ("gray", 333.0), ("csf", 33.3))}
+    assert len(contrast.contrast_path(materials)) == 3
+    h3.without_contrast_path()
+    assert contrast.contrast_path(materials) == [pytest.approx(20.0)]
+    assert issubclass(sequencing.NewtonSolver, contrast.NewtonSolver)
+
+
+def test_a_fine_stage_that_stalled_reports_its_iterations_and_residual_from_its_message():
+    """A failed Newton solve from a carried-over state leaves no load-step record: its
+    iterations and last residual are those its message gives."""
+    s = {"converged": False, "load_reached": 1.0, "load_steps": 0, "newton_iterations": 0,
+         "final_residual": None, "linear_iterations": 1292,
+         "message": "Newton did not converge at load 1.0000 from the given state (|R| = "
+                    "3.09e-05 after 14 iterations) (contrast path stopped at 20 of 20)"}
+    row = h3.row_from_summary(s, "edge-2mm", "sequenced-no-contrast")
+    assert (row["newton"], row["residual"], row["gmres"]) == (14, 3.09e-5, 1292)
+    converged = {**s, "converged": True, "load_steps": 3, "newton_iterations": 13}
+    assert h3.row_from_summary(converged, "c", "v")["newton"] == 13
+
+
+def test_a_stopped_run_reports_its_accepted_load_steps_and_last_residual_from_its_log():
+    log = """2026-12-06 22:34:22,301 INFO     newton 4: |R| = 7.993e-07 (564 s)
+2026-12-06 22:34:22,512 INFO   load 0.2500: 4 Newton iterations, |R| = 7.99e-07
+2026-12-06 22:44:43,089 INFO   load 0.6250: not converged (|R| = 1.76e-05), cutting step
+2026-12-06 22:46:54,634 INFO   load 0.4375: 3 Newton iterations, |R| = 1.68e-07
+2026-12-06 22:50:06,353 INFO     newton 2: |R| = 1.476e-04 (191 s)
+"""
+    row = h3.row_from_log(log, "taylor-hood", "left-flap_both-swelling")
+    assert (row["load"], row["newton"], row["residual"]) == (0.4375, 7, 1.476e-4)
+    text = h3.format_row({**row, "run_s": 3000.0, "peak_mb": None})
+    assert "| stopped | 0.438 | 7+ | - | 1.5e-04 |" in text
+    assert h3.row_from_log("", "c", "v")["load"] == 0.0
