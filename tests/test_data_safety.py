@@ -222,8 +222,10 @@ def test_sigterm_ends_child_processes_and_leaves_a_true_status(tmp_path, signum)
     import psutil
 
     out = tmp_path / "out"
+    # as from a terminal, also when the tests themselves run under nohup (SIGHUP ignored)
     run = subprocess.Popen([sys.executable, "-c", SLOW, *FAST, "--out", str(out)], env=ENV,
-                           stderr=subprocess.PIPE, text=True)
+                           stderr=subprocess.PIPE, text=True,
+                           preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_DFL))
     try:
         for _ in range(600):
             if (out / "child.pid").is_file() and (out / "child.pid").read_text():
