@@ -92,7 +92,8 @@ def m_sliding_rotation(run: Run) -> Row:
     why = []
     if towards < 0.1:
         why.append("the tissue at the edge slides under the skull, away from the opening, not "
-                   f"out of it (the paper's sharp-edged arc; [model.md]({SKULL_SECTION}))")
+                   "out of it (the paper's sharp-edged arc; "
+                   f"[docs/model.md, section 10]({SKULL_SECTION}))")
     if not turns:
         why.append("the tissue next to the edge does not turn out more with sliding")
     return Row(ours, "differs" if not (slides and turns) else "holds", "; ".join(why))
