@@ -101,8 +101,35 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     for key in ("max_radial_stretch", "min_tangential_stretch", "max_principal_strain",
                 "raw_max_radial_stretch", "max_displacement", "integral_J_minus_Js",
                 "p95_radial_stretch", "p05_tangential_stretch", "p99_principal_strain",
-                "swelling_volume", "max_abs_J_minus_Js", "argmax_radial_stretch"):
+                "swelling_volume", "max_abs_J_minus_Js", "argmax_radial_stretch",
+                "median_abs_Je_minus_1", "p95_abs_Je_minus_1"):
         assert chunked[key] == pytest.approx(whole[key], rel=1e-12, abs=1e-15), key
+    assert chunked["abs_Je_minus_1_by_region"] == whole["abs_Je_minus_1_by_region"]
+
+
+def test_points_know_their_region() -> None:
+    """Each sampled point's region (kept instead of NGSolve's point array) is the region
+    of the element NGSolve maps it into."""
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.results.quadrature import quadrature_points
+    from brainbulge.results.summary import point_fields
+    from brainbulge.solver import MixedForm
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, mesh_size=0.1)
+    form = MixedForm(hemidisk_problem(case))
+    mesh = form.mesh
+    regions = sorted(set(mesh.GetMaterials()))
+    assert len(regions) > 1
+    points = point_fields(form, np.zeros(2))
+    assert points.q.points is None
+    q = quadrature_points(mesh, order=4)
+    assert np.array_equal(points.X, q.X)
+    for r in regions:
+        expected = q(mesh.MaterialCF({r: 1.0}, default=0.0)) > 0.5
+        assert expected.any()
+        assert np.array_equal(points.in_regions(r), expected), r
+    assert not points.in_regions("no-such-region").any()
+    assert points.in_regions("|".join(regions)).all()
 
 
 def test_argmax_locations_carry_their_maxima_outside_the_exclusion_disks() -> None:

@@ -254,9 +254,7 @@ def brain_extreme_sites(bm, flap_name: str, skull, swell_sides: tuple[str, ...],
                       lambda X: flap.cutter_distance(X)[0] < 0,
                       lambda X: -skull.envelope_distance(X, gradient=False)[0])
     rx = re.compile(f"^(?:{tissue})$")
-    mesh = points.q.mesh
-    in_tissue = points.q(mesh.MaterialCF(
-        {r: 1.0 for r in set(mesh.GetMaterials()) if rx.match(r)}, default=0.0)) > 0.5
+    in_tissue = points.in_regions(tissue)
 
     def allowed(idx: np.ndarray) -> np.ndarray:
         return in_tissue[idx] & (rim_distance(points.X[idx]) >= band_mm)

@@ -26,7 +26,6 @@ The other measures of a plan are the scenario's summary keys: ``p99_principal_st
 
 from __future__ import annotations
 
-import re
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -66,18 +65,14 @@ def damage_measures(
     if not 0 < threshold < 10:
         raise ValueError(f"strain threshold {threshold!r} must lie in (0, 10)")
     lo, hi = rim_band_mm
-    q = points.q
-    rx = re.compile(f"^(?:{parenchyma})$")
-    regions = set(q.mesh.GetMaterials())
-    in_par = q(q.mesh.MaterialCF({r: 1.0 for r in regions if rx.match(r)},
-                                 default=0.0)) > 0.5
+    in_par = points.in_regions(parenchyma)
     strain = points.fields["max_principal_strain"]
     stretch_t = points.fields["lambda_t"]
     rim = np.zeros(len(points.X), dtype=bool)
     for a in range(0, len(points.X), CHUNK):
         r = rim_distance_mm(points.X[a:a + CHUNK], flap, skull, beyond=hi)
         rim[a:a + CHUNK] = (r >= lo) & (r <= hi)
-    w = q.weights
+    w = points.q.weights
     rim &= in_par
     volume = float(w[in_par].sum())
     strained = float(w[in_par & (strain > threshold)].sum())

@@ -22,6 +22,7 @@ percentiles with the mesh. ``J`` and the constraint statistics use the solution'
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -152,12 +153,13 @@ def field_percentiles(
     return out
 
 
-def region_of_points(mesh, q) -> tuple[np.ndarray, list[str]]:
-    """The region of each integration point of ``q`` (a ``QuadraturePoints``), as an index
-    into the returned names (the last, ``none``, for a point in no region). Indices, not
-    names: a name per point took ~60 bytes, 0.9 GB at a 1.40M-tet brain's 15M points."""
+def region_of_points(mesh, points) -> tuple[np.ndarray, list[str]]:
+    """The region of each of the NGSolve mesh ``points``, as an index into the returned
+    names (the last, ``none``, for a point in no region). Indices, not names: a name per
+    point took ~60 bytes, 0.9 GB at a 1.40M-tet brain's 15M points."""
     names = list(dict.fromkeys(mesh.GetMaterials()))
-    index = q(mesh.MaterialCF({r: float(i) for i, r in enumerate(names)}, default=-1.0))
+    index = np.asarray(mesh.MaterialCF({r: float(i) for i, r in enumerate(names)},
+                                       default=-1.0)(points)).reshape(-1)
     index = np.rint(index).astype(np.int16)
     index[index < 0] = len(names)
     return index, [*names, "none"]
@@ -178,18 +180,19 @@ def constraint_statistics(J: np.ndarray, Js: np.ndarray, weights: np.ndarray,
     dev = np.abs(J / Js - 1.0)
     w = np.asarray(weights, dtype=float)
 
-    def stats(sel: np.ndarray) -> dict[str, float]:
-        med, p95 = (float(np.percentile(dev[sel], q, weights=w[sel], method="inverted_cdf"))
-                    for q in (50, 95))
-        return {"median": med, "p95": p95, "raw_max": float(dev[sel].max())}
+    def stats(sel: np.ndarray | slice) -> dict[str, float]:
+        v = dev[sel]  # one weighted sort for both percentiles
+        med, p95 = np.percentile(v, (50, 95), weights=w[sel], method="inverted_cdf")
+        return {"median": float(med), "p95": float(p95), "raw_max": float(v.max())}
 
-    total = stats(np.ones(len(dev), dtype=bool))
+    total = stats(slice(None))
+    present = np.flatnonzero(np.bincount(regions, minlength=len(names)))
     return {
         "median_abs_Je_minus_1": total["median"],
         "p95_abs_Je_minus_1": total["p95"],
         "raw_max_abs_Je_minus_1": total["raw_max"],
         "abs_Je_minus_1_by_region": {names[r]: stats(regions == r) for r in
-                                     sorted(np.unique(regions), key=lambda r: names[r])},
+                                     sorted(present, key=lambda r: names[r])},
     }
 
 
@@ -205,16 +208,29 @@ class PointFields:
     points of every percentile and extreme of the summary (and of a plan's damage measures,
     :mod:`brainbulge.results.plan_measures`), sampled once.
 
-    ``q``: the points and their reference volumes ``q.weights``; ``X`` their reference
-    coordinates, ``Js`` the swelling there, ``fields`` the 1D fields of
+    ``q``: the points' reference coordinates ``q.X`` and reference volumes ``q.weights``
+    (its NGSolve point array dropped once sampled: 0.7 GB at 15M points); ``Js`` the
+    swelling there, ``fields`` the 1D fields of
     :func:`~brainbulge.results.fields.output_fields` (stretches and strains from the
-    recovered gradient, ``J`` the solution's own).
+    recovered gradient, ``J`` the solution's own); ``region`` each point's region as an
+    index into ``region_names`` (:func:`region_of_points`).
     """
 
     q: QuadraturePoints
-    X: np.ndarray
     Js: np.ndarray
     fields: dict[str, np.ndarray]
+    region: np.ndarray
+    region_names: list[str]
+
+    @property
+    def X(self) -> np.ndarray:
+        """Reference coordinates of the points, ``(n, dim)``."""
+        return self.q.X
+
+    def in_regions(self, pattern: str) -> np.ndarray:
+        """True at the points in a region whose whole name matches the regex ``pattern``."""
+        rx = re.compile(f"^(?:{pattern})$")
+        return np.array([bool(rx.match(n)) for n in self.region_names])[self.region]
 
 
 def point_fields(form, centre: np.ndarray,
@@ -226,17 +242,20 @@ def point_fields(form, centre: np.ndarray,
     q = quadrature_points(form.mesh, order=4)
     G = gradient if gradient is not None else recovered_gradient(
         form.mesh, form.output_displacement())
-    parts = []
-    for a in range(0, len(q.X), CHUNK):
-        s = sample(form, q.points[a:a + CHUNK], gradient=G)
+    n = len(q.X)
+    Js, region = np.empty(n), np.empty(n, dtype=np.int16)
+    fields: dict[str, np.ndarray] = {}
+    for a in range(0, n, CHUNK):  # filled in place: no second copy of the fields
+        chunk = slice(a, min(a + CHUNK, n))
+        s = sample(form, q.points[chunk], gradient=G)
         f = output_fields(s, centre, None if fibres is None else fibres(s.X))
-        parts.append((s.X, s.Js, {k: v for k, v in f.items() if v.ndim == 1}))
-    return PointFields(
-        q=q,
-        X=np.concatenate([part[0] for part in parts]),
-        Js=np.concatenate([part[1] for part in parts]),
-        fields={k: np.concatenate([part[2][k] for part in parts]) for k in parts[0][2]},
-    )
+        for k, v in f.items():
+            if v.ndim == 1:
+                fields.setdefault(k, np.empty(n, dtype=v.dtype))[chunk] = v
+        Js[chunk] = s.Js
+        region[chunk], names = region_of_points(form.mesh, q.points[chunk])
+    return PointFields(q=dataclasses.replace(q, points=None), Js=Js, fields=fields,
+                       region=region, region_names=names)
 
 
 def solution_summary(
@@ -293,18 +312,14 @@ def solution_summary(
         out.update(field_extremes(X, fields, keep))
         out.update(field_percentiles(fields, q.weights, keep, peak_volume=peak_volume))
     else:
-        rx = re.compile(f"^(?:{tissue})$")
-        mask_cf = form.mesh.MaterialCF(
-            {r: 1.0 for r in set(form.mesh.GetMaterials()) if rx.match(r)}, default=0.0
-        )
-        in_tissue = q(mask_cf) > 0.5
+        in_tissue = points.in_regions(tissue)
         for prefix, sel in (("", in_tissue), (CSF, ~in_tissue)):
             if sel.any():
                 sub = {k: v[sel] for k, v in fields.items()}
                 out.update(field_extremes(X[sel], sub, keep[sel], prefix))
                 out.update(field_percentiles(sub, q.weights[sel], keep[sel], prefix,
                                              peak_volume))
-    out.update(constraint_statistics(J, Js, q.weights, *region_of_points(form.mesh, q)))
+    out.update(constraint_statistics(J, Js, q.weights, points.region, points.region_names))
     out["raw_max_abs_J_minus_Js"] = float(np.max(np.abs(J - Js)))
     out["max_abs_J_minus_Js"] = float(np.max(np.abs(J - Js)[keep])) if keep.any() else None
     out["integral_J_minus_Js"] = float(np.sum((J - Js) * q.weights))

@@ -36,6 +36,7 @@ from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
 from brainbulge.atomic import atomic_output
+from brainbulge.geometry.brain.boundaries import faces_once
 from brainbulge.results.figures import (  # noqa: E402
     CMAPS,
     LABELS,
@@ -276,9 +277,7 @@ def brain_surface(nodes: np.ndarray, tets: np.ndarray, brain_tets: np.ndarray
     owner = np.flatnonzero(brain_tets)
     local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
     tri = T[:, local].reshape(-1, 3)
-    key = np.sort(tri, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = counts[inverse.ravel()] == 1
+    once = faces_once(tri)
     tri, tet = tri[once], np.repeat(owner, 4)[once]
     opposite = np.asarray(tets)[tet, np.tile(np.arange(4), len(T))[once]]  # face k: not k
     X = np.asarray(nodes, dtype=float)

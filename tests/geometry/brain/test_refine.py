@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from brainbulge.geometry.brain.boundaries import boundary_faces
+from brainbulge.geometry.brain.boundaries import boundary_faces, faces_once
 from brainbulge.geometry.brain.quality import dihedral_angles_deg, tet_volumes_mm3
 from brainbulge.geometry.brain.refine import move_onto_surface, refine_uniformly
 
@@ -113,3 +113,20 @@ def test_a_move_that_would_flatten_a_tet_is_not_made(ball) -> None:
     moved, stayed = move_onto_surface(fine_nodes, fine_tets, new, far)
     assert stayed == len(new)
     assert np.array_equal(moved, fine_nodes)
+
+
+def test_boundary_faces_of_a_ball_close_its_surface(ball) -> None:
+    """Every edge of the boundary faces is shared by exactly two of them (a closed surface),
+    and :func:`faces_once` agrees with counting rows by ``np.unique`` on all faces, in
+    whatever vertex order a face is listed."""
+    nodes, tets = ball
+    faces, owner = boundary_faces(tets)
+    edges = np.sort(faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
+    assert (np.unique(edges, axis=0, return_counts=True)[1] == 2).all()
+    assert np.isin(faces, tets[owner]).all()
+    every = tets[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3)
+    every = np.random.default_rng(0).permuted(every, axis=1)
+    _, inverse, counts = np.unique(np.sort(every, axis=1), axis=0, return_inverse=True,
+                                   return_counts=True)
+    assert (faces_once(every) == (counts[inverse.ravel()] == 1)).all()
+    assert faces_once(every).sum() == len(faces)

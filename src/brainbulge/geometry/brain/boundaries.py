@@ -80,11 +80,29 @@ class SuperiorBand:
 def boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Faces (k, 3) of the outer surface, outward oriented, and the tet each belongs to."""
     faces = tets[:, _TET_FACES].reshape(-1, 3)
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    outer = counts[inverse.ravel()] == 1
+    outer = faces_once(faces)
     owner = np.repeat(np.arange(len(tets)), 4)
     return faces[outer], owner[outer]
+
+
+def faces_once(faces: np.ndarray) -> np.ndarray:
+    """True at the faces (k, 3) of vertex indices whose vertex set occurs once: the
+    boundary faces among all faces of a set of tets.
+
+    Each face becomes one integer (its sorted vertices in base ``n``), sorted once: on the
+    1.40M-tet brain's 5.6M faces 7 s -> 1 s against ``np.unique(..., axis=0)``."""
+    key = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    n = int(key.max(initial=0)) + 1
+    if n ** 3 >= 2**63:  # a mesh beyond 2M vertices: rows compared as rows
+        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        return counts[inverse.ravel()] == 1
+    code = (key[:, 0] * n + key[:, 1]) * n + key[:, 2]
+    order = np.argsort(code)
+    same = code[order[1:]] == code[order[:-1]]
+    repeated = np.zeros(len(code), dtype=bool)
+    repeated[order[1:][same]] = True
+    repeated[order[:-1][same]] = True
+    return ~repeated
 
 
 def face_areas_mm2(nodes: np.ndarray, faces: np.ndarray) -> np.ndarray:
