@@ -40,6 +40,7 @@ import hashlib
 import json
 import logging
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -220,11 +221,16 @@ def write_brain_outputs(
     del points  # the outputs' largest arrays, gone before the vertex fields
     vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G)
     add_contact_fields(vf, form)
-    write_vtu(out_dir / "fields.vtu", vf)
-    save_vertex_fields(out_dir / "fields.npz", vf)
     state = "" if sol.converged else f" (stopped at Js = {sol.swelling_reached:.3f})"
-    section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
-    write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
+    # the field files are compressed (zlib, outside the GIL) while the figures are drawn:
+    # at 1.40M tets 9 s of compression, ~10 s of drawing
+    with ThreadPoolExecutor(max_workers=1) as files:
+        written = [files.submit(write_vtu, out_dir / "fields.vtu", vf),
+                   files.submit(save_vertex_fields, out_dir / "fields.npz", vf)]
+        section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
+        write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
+        for file in written:
+            file.result()
     atomic_write_json(out_dir / "summary.json", summary)
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
