@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import types
 
+import numpy as np
 import pytest
 
 from brainbulge.cli import build_parser
 from brainbulge.cli.brain import config_from_args
 from brainbulge.errors import InputError
+from brainbulge.geometry.brain.export import stored_tets
 from brainbulge.model.brain import (
     LARGE_TETS,
     CraniectomyCase,
@@ -40,7 +42,35 @@ def test_explicit_options_win() -> None:
 
 
 def test_a_given_mesh_is_not_refined_unasked() -> None:
-    assert size_defaults(1_400_000, mesh_given=True) == (0, None, "pardiso")
+    assert size_defaults(1_400_000, mesh_given=True) == (0, None, "krylov")
+    assert size_defaults(100_000, mesh_given=True) == (0, None, "pardiso")
+
+
+@pytest.mark.parametrize("tets, solver", [(LARGE_TETS - 1, "pardiso"), (LARGE_TETS, "krylov")])
+def test_a_mesh_file_chooses_the_solver_by_its_own_size(tmp_path, tets, solver) -> None:
+    """``--mesh`` of a paper-resolution brain gets GMRES, as the same mesh built by the
+    command does (PARDISO would need several times the memory); the size is read from the
+    file, whatever ``--tets`` says."""
+    path = tmp_path / "brain.npz"
+    np.savez(path, tets=np.zeros((tets, 4), dtype=np.int32))
+    assert stored_tets(path) == tets
+    case = CraniectomyCase(mesh=str(path))
+    assert (case.refine, case.linear_solver) == (0, solver)
+    assert CraniectomyCase(mesh=str(path), tets=5_000_000).linear_solver == solver
+    assert CraniectomyCase(mesh=str(path), linear_solver="pardiso").linear_solver == "pardiso"
+
+
+def test_an_unreadable_mesh_file_is_a_clear_error(tmp_path) -> None:
+    """Reading the size refuses a file that is no brain.npz; the case then keeps the
+    defaults of ``--tets`` and leaves the refusal to the mesh's reader (which says more)."""
+    path = tmp_path / "brain.npz"
+    path.write_text("not a mesh")
+    with pytest.raises(InputError, match="cannot read brain mesh"):
+        stored_tets(path)
+    assert CraniectomyCase(mesh=str(path)).linear_solver == "pardiso"
+    np.savez(path, nodes=np.zeros((3, 3)))  # a zip without tets
+    with pytest.raises(InputError, match="give a brain.npz"):
+        stored_tets(path)
 
 
 def test_the_case_resolves_its_defaults_and_knows_its_nested_coarse_mesh() -> None:

@@ -10,6 +10,7 @@ reads it without the meshing stack or NGSolve (the problem is built by
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -47,8 +48,9 @@ TETS_RANGE = (1_000, 5_000_000)
 def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None = None,
                   linear_solver: str | None = None,
                   mesh_given: bool = False) -> tuple[int, int | None, str]:
-    """``(refine, coarse_tets, linear_solver)`` for a mesh of about ``tets`` tets; each
-    argument given (not None) is kept as it is.
+    """``(refine, coarse_tets, linear_solver)`` for a mesh of about ``tets`` tets (a mesh
+    read from a file: its own number of tets); each argument given (not None) is kept as it
+    is.
 
     From :data:`LARGE_TETS` up: Netgen at ``tets / 8``, refined once (``refine = 1``), the
     load ramped on the fine mesh and GMRES with AMG blocks (``krylov``); below it: one
@@ -59,10 +61,10 @@ def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None 
     ``coarse_tets = 0`` is the same as None. A mesh read from a file (``mesh_given``) is not
     refined unless asked.
     """
-    large = tets >= LARGE_TETS and not mesh_given
+    large = tets >= LARGE_TETS
     if refine is None:
-        refine = 1 if large else 0
-    if linear_solver is None:
+        refine = 1 if large and not mesh_given else 0
+    if linear_solver is None:  # PARDISO on a 1.40M-tet brain: ~5.9M unknowns, out of memory
         linear_solver = "krylov" if large else "pardiso"
     return refine, coarse_tets or None, linear_solver
 
@@ -176,9 +178,16 @@ class CraniectomyCase:
             self.flap_centre_mm = tuple(self.flap_centre_mm)  # type: ignore[assignment]
         self.coarse_tets = self.coarse_tets or None  # 0: none
         check_ranges(self)
+        size = self.tets
+        if self.mesh is not None:
+            from brainbulge.geometry.brain.export import stored_tets
+
+            # a given mesh's own size; a file that is no brain.npz is refused where it is
+            # read, with the reader's reason
+            with contextlib.suppress(InputError):
+                size = stored_tets(self.mesh)
         self.refine, self.coarse_tets, self.linear_solver = size_defaults(
-            self.tets, self.refine, self.coarse_tets, self.linear_solver,
-            self.mesh is not None)
+            size, self.refine, self.coarse_tets, self.linear_solver, self.mesh is not None)
         if self.linear_solver not in LINEAR_SOLVERS:
             raise InputError(f"linear solver {self.linear_solver!r}: choose pardiso or krylov")
         if self.element not in ELEMENTS:
