@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from brainbulge.results.plan_defaults import LINEAR_SOLVER
+from brainbulge.results.measures.plan_defaults import LINEAR_SOLVER
 from brainbulge.runtime import configure as configure_runtime
 
 
@@ -42,7 +42,7 @@ def main() -> None:
     configure_runtime()
 
     from brainbulge.model.brain import CraniectomyCase
-    from brainbulge.results.plan_report import plan_rows, recommend
+    from brainbulge.results.present.plan_report import plan_rows, recommend
     from brainbulge.studies import plan as planner
     from brainbulge.studies.craniectomy import prepare_study_mesh
 

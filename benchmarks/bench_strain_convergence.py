@@ -13,7 +13,7 @@ stalls above the default, known-limits.md). Per member, the
 table gives the volume percentiles p95 / p99 of the maximum principal strain and of the
 radial and tangential stretch over the parenchyma outside the 5 mm rim band, their maximum
 there and the value they exceed in 0.1 ml of it (``peak``, as in the summaries), from the raw
-element gradient ``Grad u`` and from the recovered gradient (``brainbulge.results.recovery``,
+element gradient ``Grad u`` and from the recovered gradient (``results.measures.recovery``,
 what the summaries report), and the change from the previous member in per cent.
 
 A 2-core machine affords two members from a ~20k-tet base (about 21k and 168k tets); the
@@ -56,10 +56,10 @@ def percentiles(form, bm, case, recovered: bool) -> dict[str, float]:
     """p95 / p99 of the FIELDS over parenchyma integration points outside the rim band."""
     import re
 
-    from brainbulge.results.fields import output_fields, sample
-    from brainbulge.results.quadrature import quadrature_points
-    from brainbulge.results.recovery import recovered_gradient
-    from brainbulge.results.summary import exceeded_in, weighted_percentiles
+    from brainbulge.results.measures.fields import output_fields, sample
+    from brainbulge.results.measures.quadrature import quadrature_points
+    from brainbulge.results.measures.recovery import recovered_gradient
+    from brainbulge.results.measures.summary import exceeded_in, weighted_percentiles
     from brainbulge.studies.craniectomy import PARENCHYMA, PEAK_VOLUME_ML
 
     q = quadrature_points(form.mesh, order=4)

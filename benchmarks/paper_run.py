@@ -39,7 +39,7 @@ class Run:
     run_info: dict[str, Any] = field(default_factory=dict)
 
     def fields(self, part: str, name: str):
-        from brainbulge.results.export import load_vertex_fields
+        from brainbulge.results.export.writers import load_vertex_fields
 
         path = self.root / part / name / "fields.npz"
         return load_vertex_fields(path) if path.is_file() else None

@@ -18,10 +18,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from brainbulge.results import figures
-from brainbulge.results.export import VertexFields, write_vtu
-from brainbulge.results.output_folder import folder_files
-from brainbulge.results.run_record import atomic_write_text
+from brainbulge.results.export.writers import VertexFields, write_vtu
+from brainbulge.results.present import figures
+from brainbulge.results.records.output_folder import folder_files
+from brainbulge.results.records.run_record import atomic_write_text
 from brainbulge.studies.hemidisk import load_vertex_fields, save_vertex_fields, write_study_table
 
 OLD = b"results of an earlier run"

@@ -25,8 +25,8 @@ import brainbulge.studies.hemidisk as hd
 from brainbulge.atomic import JOURNAL, atomic_output, atomic_write_text, note_written
 from brainbulge.cli import main
 from brainbulge.errors import InputError
-from brainbulge.results.output_folder import LOCK_FILE, claim_output_dir, read_manifest
-from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.records.output_folder import LOCK_FILE, claim_output_dir, read_manifest
+from brainbulge.results.records.run_record import atomic_write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
@@ -117,7 +117,7 @@ def test_results_are_readable_as_the_umask_allows(tmp_path) -> None:
 
 
 HOLD = ("import sys, time\n"
-        "from brainbulge.results.output_folder import claim_output_dir\n"
+        "from brainbulge.results.records.output_folder import claim_output_dir\n"
         "claim_output_dir(sys.argv[1], overwrite=False)\n"
         "print('locked', flush=True)\n"
         "time.sleep(120)\n")

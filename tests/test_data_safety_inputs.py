@@ -21,7 +21,7 @@ import brainbulge.studies.craniectomy as cr
 import brainbulge.studies.hemidisk as hd
 from brainbulge.atomic import atomic_output
 from brainbulge.cli import checks, main
-from brainbulge.results.output_folder import claim_output_dir, read_manifest
+from brainbulge.results.records.output_folder import claim_output_dir, read_manifest
 
 FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
 SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
@@ -65,7 +65,7 @@ def mesh_folder(tmp_path, monkeypatch) -> Path:
     """A folder ``M`` as ``brainbulge mesh --out M`` leaves it (a stand-in brain.npz)."""
     folder = tmp_path / "M"
     claimed = claim_output_dir(folder, overwrite=False)
-    from brainbulge.results.run_record import mark_status, write_run_record
+    from brainbulge.results.records.run_record import mark_status, write_run_record
 
     write_run_record(folder, {"command": "mesh", "mesh": {"tets": 30000}}, ["brainbulge"])
     write(folder / "brain.npz", b"the mesh")
@@ -250,7 +250,7 @@ def test_run_files_of_studies_meshes_plans_and_the_demo_run(tmp_path, monkeypatc
     monkeypatch.setattr(demo, "run_command", lambda args: seen.append(args.quick) or 0)
     import tomli_w
 
-    from brainbulge.results.config_file import toml_ready
+    from brainbulge.results.records.config_file import toml_ready
     from brainbulge.studies.suites import demo_plan
 
     toml.write_text(tomli_w.dumps(toml_ready({"command": "demo", "quick": True,

@@ -12,7 +12,7 @@
   ``solver/linear/amg.py``, dotted names such as ``results.summary.exceeded_in``, UPPER_CASE
   constants) name files, modules, attributes and constants that exist.
 - The tables of ``summary.json`` keys in docs/outputs.md are the declarations of
-  ``results/schema.py`` (:func:`brainbulge.results.schema.markdown_table`): the same keys,
+  ``results/measures/schema.py`` (:func:`~.schema.markdown_table`): the same keys,
   units and meanings. ``python tests/test_docs.py`` writes them into the page.
 """
 
@@ -27,7 +27,7 @@ import pytest
 
 from brainbulge.cli import build_parser
 from brainbulge.geometry.brain.labels import read_label_map
-from brainbulge.results import schema
+from brainbulge.results.measures import schema
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -276,9 +276,10 @@ def test_help_texts_name_existing_code() -> None:
 def test_stale_names_are_found() -> None:
     """The check above sees a removed module, constant and attribute."""
     text = (
-        "`solver/linear.py` and `solver/krylov.py`, `COARSE_TETS`, `results.summary.exceeded_at`, "
+        "`solver/linear.py` and `solver/krylov.py`, `COARSE_TETS`, "
+        "`results.measures.summary.exceeded_at`, "
         "`python benchmarks/bench_nothing.py --x 1`; these exist: `solver/linear/amg.py`, "
-        "`krylov.py`, `LARGE_TETS`, `brainbulge.heap`, `results.summary.exceeded_in`, "
+        "`krylov.py`, `LARGE_TETS`, `brainbulge.heap`, `results.measures.summary.exceeded_in`, "
         "`summary.json`, `brainbulge.log`, `OMP_NUM_THREADS`"
     )
     names = code_names(text)
@@ -286,12 +287,12 @@ def test_stale_names_are_found() -> None:
         "solver/linear.py",
         "solver/krylov.py",
         "COARSE_TETS",
-        "results.summary.exceeded_at",
+        "results.measures.summary.exceeded_at",
         "benchmarks/bench_nothing.py",
     }
 
 
-# --- the tables of summary.json keys: the declarations of results/schema.py ---------------
+# --- the tables of summary.json keys: the declarations of results/measures/schema.py ---
 
 OUTPUTS = DOCS / "outputs.md"
 #: the line before each key table of docs/outputs.md -> the table (of the keys written by
@@ -326,7 +327,7 @@ def written_key_tables(text: str) -> str:
 
 def test_summary_key_tables_are_the_schemas() -> None:
     """Every key and field, unit and meaning of the tables is declared in
-    ``results/schema.py``, and every declared one is in a table."""
+    ``results/measures/schema.py``, and every declared one is in a table."""
     text = OUTPUTS.read_text(encoding="utf-8")
     for intro, (a, b) in key_tables(text).items():
         assert text[a:b].rstrip("\n") == KEY_TABLES[intro], (

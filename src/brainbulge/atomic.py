@@ -48,7 +48,7 @@ def atomic_output(path: Path) -> Iterator[Path]:
 
 #: The journal of a claimed output folder: one JSON line ``[path, size, mtime_ns]`` per file
 #: a brainbulge process (this one, a Dask worker, the mesher) wrote into it, appended as each
-#: is written; the folder's manifest is made from it (`brainbulge.results.output_folder`).
+#: is written; the folder's manifest is made from it (`brainbulge.results.records.output_folder`).
 JOURNAL = ".brainbulge.journal"
 
 

@@ -166,8 +166,8 @@ EXIT = {"infeasible": 3}
 
 def _finished_run(folder: Path, command: str = "hemidisk", manifest: bool = True) -> None:
     """A finished brainbulge run, as the CLI leaves it (record, results, manifest)."""
-    from brainbulge.results.output_folder import claim_output_dir
-    from brainbulge.results.run_record import mark_status, write_run_record
+    from brainbulge.results.records.output_folder import claim_output_dir
+    from brainbulge.results.records.run_record import mark_status, write_run_record
 
     claimed = claim_output_dir(folder, overwrite=False)
     write_run_record(folder, {"command": command, command: {"alpha": 80.0}}, ["brainbulge"])
@@ -185,8 +185,8 @@ def _finished_run(folder: Path, command: str = "hemidisk", manifest: bool = True
 def _finished_study(folder: Path) -> None:
     from brainbulge.cli import build_parser
     from brainbulge.cli.study import scenarios_for
-    from brainbulge.results.output_folder import claim_output_dir
-    from brainbulge.results.run_record import mark_status, write_run_record
+    from brainbulge.results.records.output_folder import claim_output_dir
+    from brainbulge.results.records.run_record import mark_status, write_run_record
 
     args = build_parser().parse_args(["study", "hemidisk-sector", "--alphas", "20", "40"])
     scenarios = scenarios_for("hemidisk-sector", args)

@@ -12,7 +12,7 @@ from brainbulge.errors import InfeasibleError, InputError
 from brainbulge.geometry.hemidisk import Hemidisk
 from brainbulge.geometry.skull2d import RigidSkull2D
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-from brainbulge.results.quadrature import quadrature_points
+from brainbulge.results.measures.quadrature import quadrature_points
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions, solve
 
 
@@ -98,7 +98,7 @@ def test_extremes_converge_with_rim_refinement() -> None:
     mesh (rim size h/10) against one with corners and rims twice as fine agree within 2 % in
     all six; with the recovered gradient the same mesh without the rim refinement is 1.9 %
     off in the strain (10 % from the raw element gradient)."""
-    from brainbulge.results.summary import solution_summary
+    from brainbulge.results.measures.summary import solution_summary
 
     keys = ("max_displacement", "max_radial_stretch", "min_radial_stretch",
             "max_tangential_stretch", "min_tangential_stretch", "max_principal_strain")
@@ -240,7 +240,7 @@ def test_larger_opening_lowers_max_radial_stretch() -> None:
     for beta in (60.0, 120.0):
         case, problem, form, solver, sol = _solve(contact="noslip", beta=beta, mesh_size=0.1)
         assert sol.converged
-        from brainbulge.results.summary import solution_summary
+        from brainbulge.results.measures.summary import solution_summary
 
         s = solution_summary(sol, np.zeros(2), case.geometry.singular_points(), 0.05)
         maxima.append(s["max_radial_stretch"])
@@ -310,7 +310,7 @@ def test_bad_input_one_line(kw, match) -> None:
 def test_contact_fields_in_the_output(sliding) -> None:
     """The VTU's contact pressure: positive where tissue presses on the skull, zero on the
     clamped base; status 1 there, -1 on the base (its two ends lie on the skull too)."""
-    from brainbulge.results.export import add_contact_fields, vertex_fields
+    from brainbulge.results.export.writers import add_contact_fields, vertex_fields
 
     case, problem, form, solver, sol = sliding
     vf = vertex_fields(form, np.zeros(2))

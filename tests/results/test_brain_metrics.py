@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import Delaunay
 
 from brainbulge.geometry.brain import MidSagittalPlane
-from brainbulge.results.brain_metrics import (
+from brainbulge.results.measures.brain_metrics import (
     MonroLocation,
     brain_volume_ml,
     bulge_volume_ml,

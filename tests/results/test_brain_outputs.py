@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from brainbulge.geometry.brain import MidSagittalPlane
-from brainbulge.results.brain_metrics import (
+from brainbulge.results.measures.brain_metrics import (
     MONRO_MNI_MM,
     TEMPLATE_BOX_MM,
     MonroLocation,
@@ -19,7 +19,7 @@ from brainbulge.results.brain_metrics import (
     locate_monro,
     monro_midline_shift_mm,
 )
-from brainbulge.results.summary import constraint_statistics
+from brainbulge.results.measures.summary import constraint_statistics
 from simple_meshes import box_mesh
 
 PLANE = MidSagittalPlane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
@@ -143,15 +143,15 @@ def test_midline_and_stress_keys_of_a_solved_brain(toy_run) -> None:
 
 
 def test_a_brain_run_writes_the_declared_keys(toy_run) -> None:
-    """``summary.json`` of a 3D run has exactly the keys ``results/schema.py`` declares for
+    """``summary.json`` of a 3D run has exactly the keys ``results/measures/schema.py`` declares for
     the brain (the toy has CSF: its ventricle), and the printout's keys among them."""
-    from brainbulge.results import schema
+    from brainbulge.results.measures import schema
 
     s, run = toy_run
     on_disk = json.loads((run / "summary.json").read_text())
     assert set(on_disk) == set(s)
     undeclared, missing = schema.check(on_disk, schema.BRAIN)
-    assert not undeclared, f"keys written but not declared in results/schema.py: {undeclared}"
+    assert not undeclared, f"keys written but not declared in the schema: {undeclared}"
     assert not missing, f"keys declared for every brain run but not written: {missing}"
     assert set(schema.argmaxes(schema.CSF)) <= set(on_disk)  # declared when there is CSF
     from output_files import written_fields
@@ -185,7 +185,7 @@ def test_a_segmentation_without_ventricles_warns(tmp_path: Path,
     depth = -bm.skull(None).envelope_distance(centroids, gradient=False)[0]
     found = locate_monro(bm.nodes_mm, bm.tets, bm.tissue == 3, depth, bm.midsagittal)
     assert found.source == "bounding box"
-    from brainbulge.results import brain_summary
+    from brainbulge.results.measures import brain_summary
 
     with caplog.at_level(logging.WARNING, logger="brainbulge"):
         brain_summary.warn_if_guessed(found)
@@ -199,7 +199,7 @@ def test_surface_views_are_drawn_and_show_the_flap(toy_run) -> None:
     the largest |u|."""
     import matplotlib.image as mpimg
 
-    from brainbulge.results.views3d import Surface, view_frame
+    from brainbulge.results.present.views3d import Surface, view_frame
 
     _, run = toy_run
     img = mpimg.imread(run / "surface.png")[..., :3]
@@ -221,7 +221,7 @@ def test_surface_views_are_drawn_and_show_the_flap(toy_run) -> None:
 
 
 def test_study_surfaces_share_one_colour_range_per_field(toy_run, tmp_path: Path) -> None:
-    from brainbulge.results.views3d import Surface, shared_ranges, write_study_surfaces
+    from brainbulge.results.present.views3d import Surface, shared_ranges, write_study_surfaces
 
     _, run = toy_run
     s = Surface.load(run / "surface.npz")

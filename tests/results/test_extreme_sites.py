@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brainbulge.results.extreme_sites import SiteContext, element_fields
+from brainbulge.results.measures.extreme_sites import SiteContext, element_fields
 from simple_meshes import box_mesh
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brainbulge.results.fields import (
+from brainbulge.results.measures.fields import (
     det3,
     largest_eigenvalue,
     max_principal_strain,
@@ -81,7 +81,7 @@ def test_radial_directions() -> None:
 def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     """The summary evaluates the fields a chunk of integration points at a time (memory of
     the 1.54M-tet brain); chunks of any size give the same extremes, locations and integrals."""
-    import brainbulge.results.summary as summary
+    import brainbulge.results.measures.summary as summary
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
@@ -111,8 +111,8 @@ def test_points_know_their_region() -> None:
     """Each sampled point's region (kept instead of NGSolve's point array) is the region
     of the element NGSolve maps it into."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-    from brainbulge.results.quadrature import quadrature_points
-    from brainbulge.results.summary import point_fields
+    from brainbulge.results.measures.quadrature import quadrature_points
+    from brainbulge.results.measures.summary import point_fields
     from brainbulge.solver import MixedForm
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, mesh_size=0.1)
@@ -136,8 +136,8 @@ def test_argmax_locations_carry_their_maxima_outside_the_exclusion_disks() -> No
     """Each ``argmax_*`` is where its ``max_*`` is: the field evaluated afresh at that point
     gives the reported maximum, and the point lies outside every edge-exclusion disk."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-    from brainbulge.results.recovery import recovered_gradient
-    from brainbulge.results.summary import solution_summary
+    from brainbulge.results.measures.recovery import recovered_gradient
+    from brainbulge.results.measures.summary import solution_summary
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
@@ -167,8 +167,8 @@ def test_volume_percentiles_converge_where_a_singular_maximum_does_not() -> None
     import ngsolve as ngs
     from netgen.geom2d import SplineGeometry
 
-    from brainbulge.results.quadrature import quadrature_points
-    from brainbulge.results.summary import field_percentiles
+    from brainbulge.results.measures.quadrature import quadrature_points
+    from brainbulge.results.measures.summary import field_percentiles
 
     results = []
     for h in (0.1, 0.05):
@@ -203,7 +203,7 @@ def test_volume_percentiles_converge_where_a_singular_maximum_does_not() -> None
 def test_weighted_percentiles_sort_only_the_tail_and_match_numpy(n: int) -> None:
     """The tail selection gives numpy's weighted inverted-cdf percentiles exactly, with
     graded weights, ties and values concentrated in the tail."""
-    from brainbulge.results.summary import weighted_percentiles
+    from brainbulge.results.measures.summary import weighted_percentiles
 
     rng = np.random.default_rng(n)
     for v, w in (
@@ -223,7 +223,7 @@ def test_weighted_percentiles_sort_only_the_tail_and_match_numpy(n: int) -> None
 def test_the_value_exceeded_in_a_volume(n: int) -> None:
     """``exceeded_in``: the largest ``t`` whose super-level set ``{v >= t}`` holds the
     volume, against a full sort; on a field uniform over a unit volume it is the quantile."""
-    from brainbulge.results.summary import exceeded_in
+    from brainbulge.results.measures.summary import exceeded_in
 
     rng = np.random.default_rng(n)
     v, w = np.round(rng.normal(size=n), 2), rng.uniform(0, 1, n) ** 3  # ties, graded
@@ -249,8 +249,8 @@ def test_mini_outputs_are_those_of_its_p1_part() -> None:
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
-    from brainbulge.results.fields import det3, sample
-    from brainbulge.results.quadrature import quadrature_points
+    from brainbulge.results.measures.fields import det3, sample
+    from brainbulge.results.measures.quadrature import quadrature_points
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1,

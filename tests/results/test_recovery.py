@@ -1,4 +1,4 @@
-"""Recovered gradients (results/recovery.py): exact on linear fields, convergent on smooth
+"""Recovered gradients (results/measures/recovery.py): exact on linear fields, convergent on smooth
 ones, discontinuous across regions."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import ngsolve as ngs
 import numpy as np
 import pytest
 
-from brainbulge.results.quadrature import quadrature_points
-from brainbulge.results.recovery import recovered_gradient
+from brainbulge.results.measures.quadrature import quadrature_points
+from brainbulge.results.measures.recovery import recovered_gradient
 from conftest import unit_box_mesh
 
 

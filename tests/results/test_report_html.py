@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from brainbulge.results.html_report import (
+from brainbulge.results.present.html_report import (
     markdown_html,
     views_marker,
     write_missing_html,
     write_report_html,
 )
-from brainbulge.results.views3d import Cut, Surface, shared_ranges
-from brainbulge.results.webview import MAX_VIEW_FACES, decimate
+from brainbulge.results.present.views3d import Cut, Surface, shared_ranges
+from brainbulge.results.present.webview import MAX_VIEW_FACES, decimate
 from headless_browser import chromium_binary
 
 
@@ -109,7 +109,7 @@ def test_a_page_of_six_paper_sized_scenarios_stays_small() -> None:
     six scenarios' views take under 15 MB (the page's budget is about 20 MB with figures)."""
     from scipy.spatial import Delaunay
 
-    from brainbulge.results.webview import MAX_CUT_FACES, brain_scene, views_html
+    from brainbulge.results.present.webview import MAX_CUT_FACES, brain_scene, views_html
 
     p, faces = sphere(60_000)
     rng = np.random.default_rng(1)

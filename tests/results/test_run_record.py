@@ -14,8 +14,8 @@ import pytest
 
 import brainbulge
 from brainbulge.errors import InputError
-from brainbulge.results import run_record
-from brainbulge.results.run_record import (
+from brainbulge.results.records import run_record
+from brainbulge.results.records.run_record import (
     load_config,
     mark_status,
     prepare_output_dir,

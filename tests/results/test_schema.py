@@ -1,4 +1,4 @@
-"""One declaration per ``summary.json`` key (``results/schema.py``): a real run writes
+"""One declaration per ``summary.json`` key (``results/measures/schema.py``): a real run writes
 exactly the declared keys of its case, and the reports and the printout name declared keys.
 (The 3D run's keys are checked on the solved toy brain in ``test_brain_outputs.py``; the
 docs tables against the declarations in ``tests/test_docs.py``.)"""
@@ -11,10 +11,10 @@ import re
 import pytest
 
 from brainbulge.cli import main
-from brainbulge.results import schema
-from brainbulge.results.craniectomy_report import COMPARISON
-from brainbulge.results.extreme_sites import SITE_KEYS
-from brainbulge.results.report import BRAIN_REPORT_KEYS, REPORT_KEYS
+from brainbulge.results.measures import schema
+from brainbulge.results.measures.extreme_sites import SITE_KEYS
+from brainbulge.results.present.craniectomy_report import COMPARISON
+from brainbulge.results.present.report import BRAIN_REPORT_KEYS, REPORT_KEYS
 from output_files import written_fields
 
 
@@ -65,7 +65,7 @@ def hemidisk_run(tmp_path_factory) -> tuple[dict, str]:
 def test_a_hemidisk_run_writes_the_declared_keys(hemidisk_run) -> None:
     summary, _, _ = hemidisk_run
     undeclared, missing = schema.check(summary, schema.HEMIDISK)
-    assert not undeclared, f"keys written but not declared in results/schema.py: {undeclared}"
+    assert not undeclared, f"keys written but not declared in the schema: {undeclared}"
     assert not missing, f"keys declared for every hemidisk run but not written: {missing}"
     assert "max_contact_pressure" in summary  # sliding: with contact
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from brainbulge.results.sections import plot_sections, section_triangles
+from brainbulge.results.present.sections import plot_sections, section_triangles
 from simple_meshes import box_mesh
 
 
@@ -73,8 +73,8 @@ def test_plot_sections_writes_a_coloured_png(tmp_path) -> None:
 
 def test_plot_fields_marks_the_failure_site(tmp_path, saved_figures) -> None:
     """A stopped run's ``failure_site`` is a red cross at that position on every panel."""
-    import brainbulge.results.figures as figures
-    from brainbulge.results.export import VertexFields
+    import brainbulge.results.present.figures as figures
+    from brainbulge.results.export.writers import VertexFields
 
     pts = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 0.5]])
     vals = np.array([0.9, 1.0, 1.1, 1.2])

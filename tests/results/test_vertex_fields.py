@@ -1,4 +1,4 @@
-"""Vertex fields for export (:func:`brainbulge.results.export.vertex_fields`) on the coarse
+"""Vertex fields for export (:func:`brainbulge.results.export.writers.vertex_fields`) on the coarse
 capped ball of contact_cases."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ def test_vertex_fields_give_the_vertex_values():
     """Vertex DOFs set to ``G X + c`` (bubbles zero): the vertex fields give them at every
     vertex (each vertex's value is the mean over the corners of its elements, so a corner
     matched to the wrong vertex shows), and the cells their regions."""
-    from brainbulge.results.export import vertex_fields
+    from brainbulge.results.export.writers import vertex_fields
 
     form, _ = _forms()
     G = np.array([[0.02, 0.01, -0.03], [0.0, -0.01, 0.02], [0.01, 0.0, 0.03]])

@@ -15,8 +15,8 @@ import pytest
 from brainbulge.geometry.inclusion import inclusion_mesh
 from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
-from brainbulge.results.fields import output_fields, sample
-from brainbulge.results.quadrature import quadrature_points
+from brainbulge.results.measures.fields import output_fields, sample
+from brainbulge.results.measures.quadrature import quadrature_points
 from brainbulge.solver import SolverOptions, solve
 
 GRAY = MooneyRivlin(0.28, 333.0)
@@ -64,7 +64,7 @@ def test_inclusion_interface_stretches_2d() -> None:
     mesh, sol = _solve(2, 0.1, h_inclusion=A / 10)
     X = np.array([[A * 1.05 * np.cos(t), A * 1.02 * np.sin(t)] for t in (0.3, 0.8, 1.2)])
     pts = [mesh(*x) for x in X]
-    from brainbulge.results.fields import Samples
+    from brainbulge.results.measures.fields import Samples
 
     F = np.tile(np.eye(3), (3, 1, 1))
     F[:, :2, :2] += np.array([np.asarray(ngs.Grad(sol.form.u)(p)).reshape(2, 2) for p in pts])

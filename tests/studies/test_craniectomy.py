@@ -206,7 +206,7 @@ def _vector_image(tmp_path, field) -> str:
 def test_fibre_image_directions(tmp_path) -> None:
     from brainbulge.errors import InputError
     from brainbulge.geometry.brain.fibres import FibreField
-    from brainbulge.results.fields import radial_directions
+    from brainbulge.results.measures.fields import radial_directions
 
     def radial_inside(X):
         v = -X  # sign is irrelevant; zero outside a ball -> radial fallback

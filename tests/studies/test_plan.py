@@ -36,7 +36,7 @@ from brainbulge.geometry.brain.flap_fit import (
     signed_lateral_mm,
 )
 from brainbulge.model.brain import CraniectomyCase
-from brainbulge.results.plan_report import COLUMNS, pareto_front, recommend
+from brainbulge.results.present.plan_report import COLUMNS, pareto_front, recommend
 from brainbulge.studies.plan import plan_cases, run_plan
 from toy_brain import toy_labels
 
@@ -358,8 +358,8 @@ def test_damage_measures_weigh_the_parenchyma_and_fall_with_the_threshold(plan, 
     """From the summary's sampled fields: the parenchyma volume is the mesh's (the order-4
     weights integrate a tet exactly), the strained volume falls as the threshold rises, lies
     within the parenchyma, and at the default threshold is the plan's."""
-    from brainbulge.results.plan_measures import damage_measures
-    from brainbulge.results.summary import point_fields
+    from brainbulge.results.measures.plan_measures import damage_measures
+    from brainbulge.results.measures.summary import point_fields
     from brainbulge.studies.craniectomy import PARENCHYMA, solve_brain
     from brainbulge.studies.plan import STATE_FILE, _state_key, load_state
 

@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 
-from brainbulge.results.export import VertexFields
+from brainbulge.results.export.writers import VertexFields
 from brainbulge.studies import hemidisk as hd
 
 

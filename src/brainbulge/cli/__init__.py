@@ -243,7 +243,7 @@ def _mark(status: str, message: str) -> None:
     """Record ``status`` in the output folder, only if this process owns it."""
     if _RUN.folder is None:
         return
-    from brainbulge.results.run_record import mark_status
+    from brainbulge.results.records.run_record import mark_status
 
     try:
         mark_status(_RUN.folder.path, status, message)
@@ -288,8 +288,8 @@ def progress_bar() -> bool:
 def start_run(args: argparse.Namespace, config: dict[str, Any], resume: bool = False) -> Path:
     """Claim ``--out`` (checked, created, locked; cleared only with ``--overwrite``), write the
     run record, mark it running, start the log file. Call only after every input is checked."""
-    from brainbulge.results.output_folder import claim_output_dir, config_paths
-    from brainbulge.results.run_record import mark_status, write_run_record
+    from brainbulge.results.records.output_folder import claim_output_dir, config_paths
+    from brainbulge.results.records.run_record import mark_status, write_run_record
 
     inputs = [*config_paths(config), getattr(args, "config", None)]  # never deleted
     folder = claim_output_dir(args.out, overwrite=args.overwrite, resume=resume,
@@ -303,8 +303,8 @@ def start_run(args: argparse.Namespace, config: dict[str, Any], resume: bool = F
 
 
 def finish_run(out: Path, message: str = "") -> None:
-    from brainbulge.results.html_report import write_missing_html
-    from brainbulge.results.run_record import mark_status
+    from brainbulge.results.present.html_report import write_missing_html
+    from brainbulge.results.records.run_record import mark_status
 
     write_missing_html(out)  # report.html next to each report.md written without one
     mark_status(out, "complete", message)

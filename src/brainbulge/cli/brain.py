@@ -54,7 +54,7 @@ def run_command(args: argparse.Namespace) -> int:
 def run_case(args: argparse.Namespace, case: Any) -> int:
     from brainbulge.model.brain_case import SOLVER_FIELDS
     from brainbulge.model.problem import case_tables
-    from brainbulge.results.schema import BRAIN, printout
+    from brainbulge.results.measures.schema import BRAIN, printout
     from brainbulge.studies.craniectomy import run_brain
 
     config = {"command": "brain", **case_tables(case, SOLVER_FIELDS)}

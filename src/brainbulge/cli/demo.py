@@ -28,7 +28,7 @@ def add_parser(sub: Any) -> None:
 
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
-    from brainbulge.results.report import write_demo_report
+    from brainbulge.results.present.report import write_demo_report
     from brainbulge.studies.runner import shared_scheduler
     from brainbulge.studies.suites import (
         brain_meshes_meanwhile,

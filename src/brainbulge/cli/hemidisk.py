@@ -37,7 +37,7 @@ def run_command(args: argparse.Namespace) -> int:
 def run_case(args: argparse.Namespace, case: Any) -> int:
     from brainbulge.model.hemidisk import SOLVER_FIELDS
     from brainbulge.model.problem import case_tables
-    from brainbulge.results.schema import HEMIDISK, extremes, printout
+    from brainbulge.results.measures.schema import HEMIDISK, extremes, printout
     from brainbulge.studies.hemidisk import run_hemidisk
 
     config = {"command": "hemidisk", **case_tables(case, SOLVER_FIELDS)}

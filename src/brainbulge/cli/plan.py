@@ -124,7 +124,7 @@ def run_plan_command(out: Path, common: dict[str, Any], args: argparse.Namespace
                      options: Any) -> tuple[int, int, str | None]:
     """Build or reuse the shared mesh, place the candidates, run the plan; return (plans
     completed, plans run, the recommended plan's name)."""
-    from brainbulge.results.plan_report import plan_rows, recommend
+    from brainbulge.results.present.plan_report import plan_rows, recommend
     from brainbulge.studies.craniectomy import case_from_dict, prepare_study_mesh
     from brainbulge.studies.plan import centres_for, plan_cases, run_plan, shared_mesh
 

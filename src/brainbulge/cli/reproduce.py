@@ -26,7 +26,7 @@ from typing import Any
 from brainbulge.cli import add_cluster_options, add_output_options, finish_run, start_run
 from brainbulge.errors import StudyIncomplete
 from brainbulge.geometry.brain.defaults import FIXATIONS, LARGE_TETS
-from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.records.run_record import atomic_write_json
 from brainbulge.studies.suites import PAPER_TETS
 
 

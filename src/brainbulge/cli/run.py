@@ -88,8 +88,8 @@ def _case_class(command: str) -> type:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from brainbulge.results.config_file import check_keys
-    from brainbulge.results.run_record import load_config
+    from brainbulge.results.records.config_file import check_keys
+    from brainbulge.results.records.run_record import load_config
 
     config = load_config(args.config)
     command = config.get("command")

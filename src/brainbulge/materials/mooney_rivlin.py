@@ -10,7 +10,7 @@ Kirchhoff stress is, in closed form::
     tau = (c1 + I1bar c2) bbar - c2 bbar^2 - (I1bar c1/3 + 2 I2bar c2/3 - J p) I
 
 ``p`` is tension-positive here (energy ``+p (J - Js)``); users see the pressure
-``-p`` (compression positive), see :func:`brainbulge.results.fields.pressure`.
+``-p`` (compression positive), see :func:`brainbulge.results.measures.fields.pressure`.
 """
 
 from __future__ import annotations

@@ -4,15 +4,15 @@
 (ParaView: every output of docs/model.md section 3 plus region and contact status), ``fields.npz``,
 ``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
 ranges) and ``surface.png`` / ``surface.npz`` (the deformed surface seen from above and from
-the flap, :mod:`brainbulge.results.views3d`). A run that stops early keeps the last converged
-state on disk, marked ``"converged": false``, and raises
+the flap, :mod:`~brainbulge.results.present.views3d`). A run that stops early keeps the last
+converged state on disk, marked ``"converged": false``, and raises
 :class:`~brainbulge.errors.ConvergenceError`. While it runs, ``restart.npz`` holds the state
 after the last accepted load step: the same scenario run again into the same directory (after
 a kill, or the end of a batch job's time) resumes from there; the file is removed when the
 run completes.
 
 Clinical metrics (lengths mm, volumes ml, stresses kPa), named for what they are
-(:mod:`brainbulge.results.brain_summary`; every key in docs/outputs.md):
+(:mod:`brainbulge.results.measures.brain_summary`; every key in docs/outputs.md):
 
 - ``midline_shift_mm``: the lateral displacement of the mid-sagittal parenchyma at the level
   of the foramen of Monro, positive towards the patient's right; the largest at any height
@@ -58,21 +58,21 @@ from brainbulge.model.brain import (
     size_defaults,
 )
 from brainbulge.model.problem import case_from_config
-from brainbulge.results.brain_metrics import brain_volume_ml, bulge_volume_ml
-from brainbulge.results.brain_summary import add_deprecated_aliases, brain_outputs
-from brainbulge.results.export import (
+from brainbulge.results.export.writers import (
     VertexFields,
     add_contact_fields,
     save_vertex_fields,
     vertex_fields,
     write_vtu,
 )
-from brainbulge.results.extreme_sites import brain_extreme_sites
-from brainbulge.results.recovery import recovered_gradient
-from brainbulge.results.run_record import atomic_write_json, atomic_write_text
-from brainbulge.results.sections import plot_sections, section_centre_mm
-from brainbulge.results.summary import PointFields, point_fields, solution_summary
-from brainbulge.results.views3d import write_surface_views
+from brainbulge.results.measures.brain_metrics import brain_volume_ml, bulge_volume_ml
+from brainbulge.results.measures.brain_summary import add_deprecated_aliases, brain_outputs
+from brainbulge.results.measures.extreme_sites import brain_extreme_sites
+from brainbulge.results.measures.recovery import recovered_gradient
+from brainbulge.results.measures.summary import PointFields, point_fields, solution_summary
+from brainbulge.results.present.sections import plot_sections, section_centre_mm
+from brainbulge.results.present.views3d import write_surface_views
+from brainbulge.results.records.run_record import atomic_write_json, atomic_write_text
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.remesh.sequencing import solve_sequenced
 
@@ -279,7 +279,7 @@ def brain_summary(
     skull: Any = None,
 ) -> dict[str, Any]:
     """``summary.json`` of a 3D scenario (see the module docstring); ``points``: the
-    state's fields at the integration points (:func:`~brainbulge.results.summary.
+    state's fields at the integration points (:func:`~brainbulge.results.measures.summary.
     point_fields`), if the caller has them (default: sampled here, radial axons);
     ``skull``: the run's rigid skull (default: made here, :func:`case_skull`)."""
     form = sol.form
@@ -472,7 +472,7 @@ def run_study_with_report(out_dir: Path, scenarios: list[dict[str, Any]],
     scenarios = attach_study_meshes(out_dir, scenarios)
     rows = run_study(scenarios, "brainbulge.studies.craniectomy:study_task", out_dir,
                      scheduler=scheduler, n_workers=workers, outputs=(FIELDS_FILE,))
-    from brainbulge.results.craniectomy_report import write_comparison, write_report
+    from brainbulge.results.present.craniectomy_report import write_comparison, write_report
 
     write_comparison(out_dir, scenarios, rows)
     write_report(out_dir, scenarios, rows)

@@ -31,23 +31,23 @@ from brainbulge.model.hemidisk import (
     hemidisk_problem,
 )
 from brainbulge.model.problem import case_from_config
-from brainbulge.results.export import (
+from brainbulge.results.export.writers import (
     add_contact_fields,
     load_vertex_fields,
     save_vertex_fields,
     vertex_fields,
     write_vtu,
 )
-from brainbulge.results.figures import (
+from brainbulge.results.measures.recovery import recovered_gradient
+from brainbulge.results.measures.summary import point_fields, solution_summary
+from brainbulge.results.present.figures import (
     plot_fields,
     plot_grid,
     plot_row,
     plot_rows,
     plot_side_by_side,
 )
-from brainbulge.results.recovery import recovered_gradient
-from brainbulge.results.run_record import atomic_output, atomic_write_json
-from brainbulge.results.summary import point_fields, solution_summary
+from brainbulge.results.records.run_record import atomic_output, atomic_write_json
 from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
 from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
 from brainbulge.studies.runner import stopped_summary

@@ -12,8 +12,8 @@ on the loaded mesh (:func:`~brainbulge.model.brain.open_case_flap`), not a new m
 - :func:`run_plan` runs them on the study runner (:mod:`brainbulge.studies.runner`: serial or
   Dask, resumable: rerun on the same folder and only what is missing runs), each into its own
   folder with the usual outputs of a 3D scenario plus the damage measures of
-  :mod:`brainbulge.results.plan_measures`, then writes ``plan.csv``, ``pareto.png``,
-  ``centres.png`` and ``report.md`` (:mod:`brainbulge.results.plan_report`).
+  :mod:`brainbulge.results.measures.plan_measures`, then writes ``plan.csv``, ``pareto.png``,
+  ``centres.png`` and ``report.md`` (:mod:`brainbulge.results.present.plan_report`).
 
 **Warm starts.** The cases run diameter by diameter, smallest first. A plan starts Newton at
 full load from the finished state (``state.npz``) of the plan at the same centre with the
@@ -46,9 +46,9 @@ from brainbulge.geometry.brain import BrainMesh
 from brainbulge.geometry.brain.boundaries import SuperiorBand
 from brainbulge.geometry.brain.flap_fit import fit_flap, signed_lateral_mm
 from brainbulge.model.brain import CraniectomyCase, open_case_flap
-from brainbulge.results.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
-from brainbulge.results.plan_measures import damage_measures
-from brainbulge.results.run_record import atomic_output
+from brainbulge.results.measures.plan_defaults import DIAMETERS_MM, N_CENTRES, STRAIN_THRESHOLD
+from brainbulge.results.measures.plan_measures import damage_measures
+from brainbulge.results.records.run_record import atomic_output
 from brainbulge.studies.craniectomy import (
     PARENCHYMA,
     case_from_dict,
@@ -123,7 +123,7 @@ def run_plan(cases: list[CraniectomyCase], out_dir: Path, scheduler: str | None 
     """Run the plan's cases that fit (module docstring) into ``out_dir/<name>/`` and write
     the plan's table, figures and report; return one row per case (refused ones included,
     ``complete`` false with the reason as ``error``)."""
-    from brainbulge.results.plan_report import write_plan_report
+    from brainbulge.results.present.plan_report import write_plan_report
     from brainbulge.studies.runner import run_study
 
     if not cases:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from brainbulge.errors import InputError
 from brainbulge.model.options import check_ranges, option
-from brainbulge.results.plan_defaults import (
+from brainbulge.results.measures.plan_defaults import (
     DIAMETERS_MM,
     LINEAR_SOLVER,
     N_CENTRES,

@@ -65,8 +65,8 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InputError
-from brainbulge.results.output_folder import refresh_manifest
-from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.records.output_folder import refresh_manifest
+from brainbulge.results.records.run_record import atomic_write_json
 from brainbulge.studies.cluster import (
     THREAD_VARIABLES,
     local_cluster,
@@ -304,7 +304,7 @@ def run_study(
         or its path ``"package.module:function"``. It writes its files into ``scenario_dir``
         (created beforehand) and returns a JSON-able summary.
     out_dir
-        Study folder (created if missing; see `brainbulge.results.run_record.prepare_output_dir`
+        Study folder (created if missing; see `results.records.run_record.prepare_output_dir`
         with ``resume=True`` for CLI use).
     scheduler
         None: a local cluster of worker processes; ``"serial"``: in this process, one after

@@ -13,7 +13,7 @@ from typing import Any
 
 from brainbulge.atomic import note_written
 from brainbulge.errors import BrainbulgeError, InputError
-from brainbulge.results.run_record import atomic_write_json
+from brainbulge.results.records.run_record import atomic_write_json
 
 #: a task: ``f(scenario, scenario_dir) -> summary``, or its import path
 Task = Callable[[dict[str, Any], Path], Mapping[str, Any]] | str

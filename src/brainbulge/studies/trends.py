@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from brainbulge.results.run_record import atomic_write_text
+from brainbulge.results.records.run_record import atomic_write_text
 
 #: a maximum "around the opening's edge" lies within this distance of a corner [R]
 EDGE_NEIGHBOURHOOD = 0.15

@@ -271,7 +271,7 @@ def test_flat_refinement_keeps_the_netgen_geometry(synthetic_image, coarse_and_r
     """``refine_onto_envelope=False``: the new surface nodes stay at the midpoints of the
     coarse surface edges, so the refined mesh has exactly the coarse mesh's volume (the
     refinement onto the envelope adds the chords' gap, > 0.1 % here)."""
-    from brainbulge.results.brain_metrics import brain_volume_ml
+    from brainbulge.results.measures.brain_metrics import brain_volume_ml
 
     coarse, moved = coarse_and_refined
     flat = build_brain_mesh(synthetic_image, target_tets=32_000, brain_volume_ml=400.0,

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from brainbulge.results import schema
-from brainbulge.results.html_report import views_marker, write_report_html
-from brainbulge.results.run_record import atomic_output, atomic_write_text
-from brainbulge.results.views3d import write_study_surfaces
+from brainbulge.results.measures import schema
+from brainbulge.results.present.html_report import views_marker, write_report_html
+from brainbulge.results.present.views3d import write_study_surfaces
+from brainbulge.results.records.run_record import atomic_output, atomic_write_text
 
 #: summary keys of the comparison table and figure -> (label, unit), declared in
-#: :mod:`brainbulge.results.schema`
+#: :mod:`brainbulge.results.measures.schema`
 COMPARISON = {key: (schema.label(key), schema.unit(key, schema.BRAIN)) for key in (
     "midline_shift_mm", "bulge_volume_ml", "max_displacement", "max_principal_strain",
     "max_radial_stretch", "max_tangential_stretch", "mean_hydrostatic_stress_kpa")}

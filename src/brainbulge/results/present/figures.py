@@ -12,8 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.tri as mtri  # noqa: E402
 import numpy as np  # noqa: E402
 
-from brainbulge.results.export import VertexFields  # noqa: E402
-from brainbulge.results.run_record import atomic_output  # noqa: E402
+from brainbulge.results.export.writers import VertexFields  # noqa: E402
+from brainbulge.results.records.run_record import atomic_output  # noqa: E402
 
 LABELS = {
     "u_magnitude": "|u|",

@@ -67,7 +67,7 @@ def _embed_images(tokens, root: Path) -> None:
 
 def markdown_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> str:
     """The body of ``report.html`` for the Markdown file ``md_path`` (module docstring)."""
-    from brainbulge.results.webview import study_views_html
+    from brainbulge.results.present.webview import study_views_html
 
     md_path = Path(md_path)
     root = md_path.parent
@@ -104,7 +104,7 @@ def markdown_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> str
 
 def write_report_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> Path:
     """Write ``report.html`` next to ``md_path`` (:func:`markdown_html`); return its path."""
-    from brainbulge.results.webview import write_page
+    from brainbulge.results.present.webview import write_page
 
     md_path = Path(md_path)
     text = md_path.read_text(encoding="utf-8")

@@ -42,7 +42,7 @@ from typing import Any
 
 from brainbulge.atomic import JOURNAL
 from brainbulge.errors import InputError
-from brainbulge.results.manifest import (
+from brainbulge.results.records.manifest import (
     ASIDE,
     LOCK_FILE,
     MANIFEST_KEY,
@@ -142,7 +142,7 @@ def _normalised(config: Any) -> Any:
 
     import tomli_w
 
-    from brainbulge.results.config_file import toml_ready
+    from brainbulge.results.records.config_file import toml_ready
 
     return tomllib.loads(tomli_w.dumps(toml_ready(config)))
 
@@ -169,7 +169,7 @@ def _check_same_run(path: Path, config: dict[str, Any] | None) -> None:
     toml = path / "run.toml"
     if config is None or not toml.is_file():
         return
-    from brainbulge.results.config_file import load_config
+    from brainbulge.results.records.config_file import load_config
 
     stored, new = load_config(toml), _normalised(config)
     if stored == new:

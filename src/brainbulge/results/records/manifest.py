@@ -4,7 +4,7 @@ Every file a brainbulge process writes into a claimed folder is appended to the 
 journal (`brainbulge.atomic.note_written`) with its size and modification time; the manifest
 (``run.json["files"]``) is made from it. A file counts as brainbulge's only while it is as
 written: one changed since, or one that appeared by other means, is the user's. `clear_listed`
-deletes the listed files all or nothing. Used by :mod:`brainbulge.results.output_folder`.
+deletes the listed files all or nothing. Used by :mod:`brainbulge.results.records.output_folder`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Fields on the mesh vertices and their ParaView file (VTU via meshio).
 
-Stretches and strains come from the recovered gradient (:mod:`brainbulge.results.recovery`),
+Stretches and strains come from the recovered gradient (:mod:`..measures.recovery`),
 continuous inside each region and discontinuous across regions, so every field is evaluated at
 each element's own vertices and averaged over the elements that share a vertex (point data);
 region and element averages are cell data. ParaView: *Warp By Vector* on ``u`` shows the
@@ -22,9 +22,9 @@ from brainbulge.geometry.ngsolve_arrays import (
     element_vertices,
     vertex_coordinates,
 )
-from brainbulge.results.fields import output_fields, sample
-from brainbulge.results.recovery import recovered_gradient
-from brainbulge.results.run_record import atomic_output
+from brainbulge.results.measures.fields import output_fields, sample
+from brainbulge.results.measures.recovery import recovered_gradient
+from brainbulge.results.records.run_record import atomic_output
 from brainbulge.solver.mixed import MixedForm
 
 

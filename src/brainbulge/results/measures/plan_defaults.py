@@ -1,5 +1,5 @@
 """Defaults of the craniectomy planner, shared by its damage measures
-(:mod:`brainbulge.results.plan_measures`), the planner (:mod:`brainbulge.studies.plan`) and
+(:mod:`brainbulge.results.measures.plan_measures`), the planner (:mod:`brainbulge.studies.plan`) and
 the ``brainbulge plan`` parser, which must not load the solver stack to show them."""
 
 #: maximum principal strain at which 50 % of axons were injured in vitro (Bain & Meaney 2000)

@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from brainbulge.results.html_report import block_marker
-from brainbulge.results.run_record import atomic_output, atomic_write_text
+from brainbulge.results.present.html_report import block_marker
+from brainbulge.results.records.run_record import atomic_output, atomic_write_text
 
 if TYPE_CHECKING:
     from brainbulge.geometry.brain import BrainMesh
@@ -245,8 +245,8 @@ def write_plan_report(out_dir: Path, cases: list[CraniectomyCase],
              write_centre_map(out_dir / "centres.png", rows, bm)]
     paths.append(atomic_write_text(out_dir / "report.md",
                                    report_text(rows, cases[0], threshold)))
-    from brainbulge.results.html_report import write_report_html
-    from brainbulge.results.webview import views_html
+    from brainbulge.results.present.html_report import write_report_html
+    from brainbulge.results.present.webview import views_html
 
     paths.append(write_report_html(out_dir / "report.md",
                                    {"plan": views_html([plan_scene(out_dir, rows, bm)], "plan")}))
@@ -267,8 +267,8 @@ def plan_scene(out_dir: Path, rows: list[dict[str, Any]], bm: BrainMesh) -> dict
     candidate flap that ran (its folder's ``surface.npz``) coloured by the chosen damage
     measure (:data:`MEASURES`; grey: not converged), the recommended one in green, and a
     cross at the centre of each candidate that did not run (refused)."""
-    from brainbulge.results.views3d import Surface
-    from brainbulge.results.webview import (
+    from brainbulge.results.present.views3d import Surface
+    from brainbulge.results.present.webview import (
         colour_maps,
         field_info,
         frame,

@@ -36,14 +36,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from brainbulge.results.fields import (
+from brainbulge.results.measures.fields import (
     max_principal_strain,
     radial_directions,
     right_cauchy_green,
     stretch_along,
     tangential_stretch,
 )
-from brainbulge.results.schema import EXTREMES, SITES
+from brainbulge.results.measures.schema import EXTREMES, SITES
 
 #: (summary key, field, kind) of the extremes whose sites are reported
 SITE_KEYS = tuple((key, EXTREMES[key[4:]][0], key[:3]) for key in SITES)
@@ -238,7 +238,7 @@ def brain_extreme_sites(bm, flap_name: str, skull, swell_sides: tuple[str, ...],
     scenario: ``bm`` its :class:`~brainbulge.geometry.brain.BrainMesh`, ``skull`` its
     :class:`~brainbulge.geometry.brain.skull.RigidSkull` with the flap ``flap_name`` open,
     ``band_mm`` the rim band left out, ``tissue`` the parenchyma's region regex, ``points``
-    the state's :class:`~brainbulge.results.summary.PointFields`, ``u_mm`` the nodal
+    the state's :class:`~brainbulge.results.measures.summary.PointFields`, ``u_mm`` the nodal
     displacements."""
     import re
 

@@ -3,7 +3,7 @@
 At any set of points (integration points for summaries, element vertices for files and
 figures) the solution is sampled as ``X``, ``u``, ``Grad u``, ``p``, ``Js``; everything else is
 NumPy. Stretches and strains use ``F = I + G`` with ``G`` the recovered gradient
-(:mod:`brainbulge.results.recovery`) where the caller passes it (the summaries and the field
+(:mod:`.recovery`) where the caller passes it (the summaries and the field
 files do):
 
 - ``J = det F``, elastic ``Je = J / Js``, swelling ``Js`` (``J`` of the solution itself: how
@@ -45,7 +45,7 @@ def sample(form: MixedForm, points: object,
     """Evaluate the state of ``form`` at NGSolve mesh points (``MapToAllElements`` output).
 
     ``gradient``: the displacement gradient that ``F`` is built from, e.g. the recovered
-    gradient of :func:`brainbulge.results.recovery.recovered_gradient` (default: the
+    gradient of :func:`brainbulge.results.measures.recovery.recovered_gradient` (default: the
     solution's own, ``Grad u``); ``J`` is always the solution's own ``det(I + Grad u)``."""
     dim = form.dim
     with ngs.TaskManager():  # threaded evaluation: 1.0 -> 0.6 s per 1.5M points

@@ -17,7 +17,7 @@ compare; the colour bars say so.
 
 ``surface.npz`` also keeps ``Je`` and the transverse and sagittal :class:`Cut` of the
 parenchyma through the sections' centre, for the interactive ``view.html``
-(:mod:`brainbulge.results.webview`).
+(:mod:`brainbulge.results.present.webview`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
 from brainbulge.atomic import atomic_output
 from brainbulge.geometry.brain.boundaries import faces_once
-from brainbulge.results.figures import (  # noqa: E402
+from brainbulge.results.present.figures import (  # noqa: E402
     CMAPS,
     LABELS,
     _limits,
@@ -45,7 +45,7 @@ from brainbulge.results.figures import (  # noqa: E402
     centred_on_one,
     range_note,
 )
-from brainbulge.results.sections import (  # noqa: E402
+from brainbulge.results.present.sections import (  # noqa: E402
     PLANES,
     section_centre_mm,
     section_triangles,
@@ -70,7 +70,7 @@ RIM = {"color": "black", "lw": 1.2}
 
 @dataclass
 class Cut:
-    """A planar section of the parenchyma (:func:`~brainbulge.results.sections.
+    """A planar section of the parenchyma (:func:`~brainbulge.results.present.sections.
     section_triangles`): reference ``points`` (p, 3) mm, ``triangles`` (t, 3), displacement
     ``u`` (p, 3) mm and nodal ``fields`` there."""
 
@@ -234,9 +234,9 @@ def shared_ranges(surfaces: Sequence[Surface]) -> dict[str, tuple[float, float]]
     """Per field (of :data:`VIEW_FIELDS` that all ``surfaces`` have), one colour range over
     the values at their surface vertices (:meth:`Surface.surface_values`; the points off the
     surface hold no value): 0 to the largest upper percentile
-    (:data:`~brainbulge.results.figures.RANGE_PERCENTILES`) for |u| and strain, from the
+    (:data:`~brainbulge.results.present.figures.RANGE_PERCENTILES`) for |u| and strain, from the
     percentiles and symmetric about 1 for stretches and Je
-    (:func:`~brainbulge.results.figures.range_note`)."""
+    (:func:`~brainbulge.results.present.figures.range_note`)."""
     out: dict[str, tuple[float, float]] = {}
     for name in VIEW_FIELDS:
         if not all(name in s.fields for s in surfaces):
@@ -291,7 +291,7 @@ def write_surface_views(vf, bm, flap: str, out_dir: Path, title: str = "") -> Pa
     """A scenario's ``surface.png`` and ``surface.npz``: the surface of the parenchyma (the
     brain without the CSF filler around it) of the brain mesh ``bm`` (a
     :class:`~brainbulge.geometry.brain.BrainMesh`) with its vertex fields ``vf`` (a
-    :class:`~brainbulge.results.export.VertexFields` on ``bm``'s nodes; its regions named
+    :class:`~brainbulge.results.export.writers.VertexFields` on ``bm``'s nodes; its regions named
     ``csf_*`` are the filler): each field at a vertex is the mean of the element values of the
     parenchyma tets around it. The flap's rim is
     that of the skull surface's flap."""
@@ -328,7 +328,7 @@ def write_surface_views(vf, bm, flap: str, out_dir: Path, title: str = "") -> Pa
                 cuts_of(vf.points, np.asarray(vf.cells)[brain], u, fields, cut_centre),
                 cut_centre)
     s.save(Path(out_dir) / "surface.npz")
-    from brainbulge.results.webview import write_view_html
+    from brainbulge.results.present.webview import write_view_html
 
     write_view_html(s, Path(out_dir) / "view.html", title=title)
     return plot_surface_views(s, Path(out_dir) / "surface.png", title=title)

@@ -15,7 +15,7 @@ volumes. A singular peak changes it only by the volume it covers, which vanishes
 refinement.
 
 Every stretch and strain is evaluated from the recovered gradient (the region-wise L2
-projection of ``Grad u`` onto continuous P1, :mod:`brainbulge.results.recovery`), not from
+projection of ``Grad u`` onto continuous P1, :mod:`brainbulge.results.measures.recovery`), not from
 the element-wise constant ``Grad u``: the element-to-element noise of the latter moved the
 percentiles with the mesh. ``J`` and the constraint statistics use the solution's own ``J``.
 """
@@ -30,10 +30,10 @@ from dataclasses import dataclass
 import ngsolve as ngs
 import numpy as np
 
-from brainbulge.results.fields import output_fields, sample
-from brainbulge.results.quadrature import QuadraturePoints, quadrature_points
-from brainbulge.results.recovery import recovered_gradient
-from brainbulge.results.schema import CSF, EXTREMES, PERCENTILES, stem_key
+from brainbulge.results.measures.fields import output_fields, sample
+from brainbulge.results.measures.quadrature import QuadraturePoints, quadrature_points
+from brainbulge.results.measures.recovery import recovered_gradient
+from brainbulge.results.measures.schema import CSF, EXTREMES, PERCENTILES, stem_key
 from brainbulge.solver.options import Solution
 
 
@@ -206,12 +206,12 @@ CHUNK = 1_000_000
 class PointFields:
     """The scalar output fields at all order-4 integration points of a solution, the
     points of every percentile and extreme of the summary (and of a plan's damage measures,
-    :mod:`brainbulge.results.plan_measures`), sampled once.
+    :mod:`brainbulge.results.measures.plan_measures`), sampled once.
 
     ``q``: the points' reference coordinates ``q.X`` and reference volumes ``q.weights``
     (its NGSolve point array dropped once sampled: 0.7 GB at 15M points); ``Js`` the
     swelling there, ``fields`` the 1D fields of
-    :func:`~brainbulge.results.fields.output_fields` (stretches and strains from the
+    :func:`~brainbulge.results.measures.fields.output_fields` (stretches and strains from the
     recovered gradient, ``J`` the solution's own); ``region`` each point's region as an
     index into ``region_names`` (:func:`region_of_points`).
     """
@@ -238,7 +238,7 @@ def point_fields(form, centre: np.ndarray,
                  gradient: ngs.CoefficientFunction | None = None) -> PointFields:
     """:class:`PointFields` of ``form``'s state, evaluated ``CHUNK`` points at a time, with
     the recovered gradient ``gradient`` (computed here when not given), ``centre`` and
-    ``fibres`` as for :func:`~brainbulge.results.fields.output_fields`."""
+    ``fibres`` as for :func:`~brainbulge.results.measures.fields.output_fields`."""
     q = quadrature_points(form.mesh, order=4)
     G = gradient if gradient is not None else recovered_gradient(
         form.mesh, form.output_displacement())

@@ -11,10 +11,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-from brainbulge.results.html_report import views_marker, write_report_html
-from brainbulge.results.run_record import atomic_write_text
+from brainbulge.results.present.html_report import views_marker, write_report_html
+from brainbulge.results.records.run_record import atomic_write_text
 
-#: the hemidisk columns of the demo's tables (keys of :mod:`brainbulge.results.schema`)
+#: the hemidisk columns of the demo's tables (keys of :mod:`brainbulge.results.measures.schema`)
 REPORT_KEYS = (
     "max_displacement",
     "max_radial_stretch",

@@ -25,7 +25,7 @@ import matplotlib.tri as mtri  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from brainbulge.results.figures import CMAPS, LABELS, _limits, _save  # noqa: E402
+from brainbulge.results.present.figures import CMAPS, LABELS, _limits, _save  # noqa: E402
 
 # name -> (normal axis, horizontal axis, vertical axis, (left, right) and (bottom, top) labels)
 # in RAS+ world coordinates (x right, y anterior, z superior).

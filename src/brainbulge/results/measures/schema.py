@@ -281,7 +281,7 @@ KEYS: tuple[Key, ...] = (
        "set near the rim is a ring around the opening, one under the flap and away from the "
        "rim lies deep in the bulge; on a coarse mesh nearly every parenchyma element touches "
        "an interface, and an extreme whose `X_mm` recurs in other scenarios belongs to one "
-       "element, not to the load (`results/extreme_sites.py`)", cases=_B),
+       "element, not to the load (`results/measures/extreme_sites.py`)", cases=_B),
     _k((*(f"element_{n}" for n in SITES), "element_sites"), "-",
        "the same extremes of the element values (the stretches of the element-constant "
        "gradient of the P1 displacement, what a linear tetrahedron reports per element) over "

@@ -4,7 +4,7 @@ Every key says what its value is (lengths mm, volumes ml, stresses kPa):
 
 - ``midline_shift_mm``: the clinical midline shift, the lateral displacement of the
   mid-sagittal parenchyma at the level of the foramen of Monro (the septum pellucidum),
-  positive towards the patient's right (:func:`~brainbulge.results.brain_metrics.
+  positive towards the patient's right (:func:`~brainbulge.results.measures.brain_metrics.
   monro_midline_shift_mm`); ``monro_location_mm`` and ``monro_location_source`` say where it
   was measured (``template`` coordinates, the segmentation's ``labels``, or the template's
   location mapped by the ``bounding box``, which is also logged as a warning).
@@ -22,7 +22,7 @@ Every key says what its value is (lengths mm, volumes ml, stresses kPa):
 
 Keys of earlier releases stay one release as aliases (:data:`DEPRECATED_ALIASES`), listed in
 the summary under ``deprecated_keys``; they are declared with the others in
-:mod:`brainbulge.results.schema`.
+:mod:`brainbulge.results.measures.schema`.
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from brainbulge.results import schema
-from brainbulge.results.brain_metrics import (
+from brainbulge.results.measures import schema
+from brainbulge.results.measures.brain_metrics import (
     MonroLocation,
     locate_monro,
     monro_midline_shift_mm,

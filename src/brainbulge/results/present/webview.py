@@ -1,5 +1,5 @@
 """Interactive 3D views in self-contained HTML: ``view.html`` of a 3D scenario and the 3D
-sections of ``report.html`` (:mod:`brainbulge.results.html_report`).
+sections of ``report.html`` (:mod:`brainbulge.results.present.html_report`).
 
 A *scene* is a JSON object that the page's viewer (``assets/viewer.js``, plain WebGL 1, no
 library: docs/design.md) draws: triangle-mesh and line layers with reference positions ``X``,
@@ -7,8 +7,8 @@ displacements ``U`` [mm] and per-vertex field values, base64-encoded float32/uin
 Everything is inline: a page opens offline from disk and requests nothing.
 
 A scenario's scene (:func:`brain_scene`) holds the deformed parenchyma surface coloured by a
-field of :data:`~brainbulge.results.views3d.VIEW_FIELDS` (colour maps as in the PNGs, ranges
-from :func:`~brainbulge.results.views3d.shared_ranges`, shared by the scenarios of a page),
+field of :data:`~brainbulge.results.present.views3d.VIEW_FIELDS` (colour maps as in the PNGs, ranges
+from :func:`~brainbulge.results.present.views3d.shared_ranges`, shared by the scenarios of a page),
 the flap's rim, the transverse and sagittal sections (shown alone, or with the surface
 clipped at their plane), and the undeformed surface and section outlines on demand. Surfaces
 over :data:`MAX_VIEW_FACES` triangles (sections over :data:`MAX_CUT_FACES`) are decimated
@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 
 from brainbulge.atomic import atomic_output
-from brainbulge.results.figures import CMAPS, range_note
-from brainbulge.results.sections import PLANES, boundary_edges
-from brainbulge.results.views3d import VIEW_FIELDS, Surface, shared_ranges, view_frame
+from brainbulge.results.present.figures import CMAPS, range_note
+from brainbulge.results.present.sections import PLANES, boundary_edges
+from brainbulge.results.present.views3d import VIEW_FIELDS, Surface, shared_ranges, view_frame
 
 #: the most triangles of a surface (and of a section) in a view; larger ones are decimated
 #: by vertex clustering (a 21k-tet brain's parenchyma surface has 5.6k, its sections 1-2k),
@@ -52,7 +52,7 @@ UNDEFORMED = {"color": (0.35, 0.35, 0.35), "alpha": 0.28}
 
 def asset(name: str) -> str:
     """The text of ``assets/<name>`` (viewer, table sorter, style sheet)."""
-    return resources.files("brainbulge.results").joinpath("assets", name).read_text("utf-8")
+    return resources.files("brainbulge.results.present").joinpath("assets", name).read_text("utf-8")
 
 
 def _b64(a: np.ndarray, dtype: Any) -> str:

@@ -1,7 +1,7 @@
 """Tissue-damage measures of a craniectomy plan, over the parenchyma (CSF apart).
 
 Taken at the integration points where the summary takes its percentiles
-(:func:`~brainbulge.results.summary.solution_summary`: order-4 points, stretches and strains
+(:func:`.summary.solution_summary`: order-4 points, stretches and strains
 from the recovered gradient), weighted by their reference volumes ``dV``:
 
 - ``strained_volume_ml``: the reference volume of parenchyma whose maximum principal
@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brainbulge.results.plan_defaults import RIM_BAND_MM, STRAIN_THRESHOLD
-from brainbulge.results.summary import CHUNK, PointFields, weighted_percentiles
+from brainbulge.results.measures.plan_defaults import RIM_BAND_MM, STRAIN_THRESHOLD
+from brainbulge.results.measures.summary import CHUNK, PointFields, weighted_percentiles
 
 if TYPE_CHECKING:
     from brainbulge.geometry.brain import Flap, RigidSkull
@@ -60,7 +60,7 @@ def damage_measures(
     rim_band_mm: tuple[float, float] = RIM_BAND_MM,
 ) -> dict[str, float | None]:
     """The measures of the module docstring from the solved state's fields at the summary's
-    integration points (:func:`~brainbulge.results.summary.point_fields`); ``parenchyma``:
+    integration points (:func:`~brainbulge.results.measures.summary.point_fields`); ``parenchyma``:
     regex of the parenchyma's region names."""
     if not 0 < threshold < 10:
         raise ValueError(f"strain threshold {threshold!r} must lie in (0, 10)")

@@ -13,7 +13,7 @@ A run's output folder holds, besides its results:
     so a crashed or interrupted run is recognisable from its folder alone.
 
 ``run.json["files"]`` lists every file the run wrote (the manifest ``--overwrite`` deletes,
-see :mod:`brainbulge.results.output_folder`). All JSON/TOML files are written atomically
+see :mod:`brainbulge.results.records.output_folder`). All JSON/TOML files are written atomically
 (temporary file in the same folder, then ``os.replace``), readable as the user's umask
 allows: a reader never sees half a file, even after a crash.
 
@@ -44,8 +44,8 @@ import tomli_w
 from brainbulge import __version__
 from brainbulge.atomic import atomic_output, atomic_write_json, atomic_write_text
 from brainbulge.errors import InputError
-from brainbulge.results.config_file import load_config, toml_ready
-from brainbulge.results.output_folder import RUN_MARKERS, refresh_manifest
+from brainbulge.results.records.config_file import load_config, toml_ready
+from brainbulge.results.records.output_folder import RUN_MARKERS, refresh_manifest
 
 __all__ = [
     "STATUSES",
@@ -88,9 +88,9 @@ def is_run_folder(path: Path) -> bool:
 def prepare_output_dir(path: Path, overwrite: bool, resume: bool = False) -> Path:
     """Check, create and (``overwrite``) clear the output folder ``path``; return it.
 
-    See `brainbulge.results.output_folder.prepare_output_dir` (and `claim_output_dir`, which
+    See `brainbulge.results.records.output_folder.prepare_output_dir` (and `claim_output_dir`, which
     also locks the folder, for commands)."""
-    from brainbulge.results.output_folder import prepare_output_dir as prepare
+    from brainbulge.results.records.output_folder import prepare_output_dir as prepare
 
     return prepare(path, overwrite, resume)
 

@@ -1,0 +1,1 @@
+"""Files for other tools: ParaView (VTU) and NumPy (NPZ) writers of the fields."""

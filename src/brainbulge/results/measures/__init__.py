@@ -1,0 +1,1 @@
+"""Post-processing: fields sampled from a solution and the measures of the summary."""

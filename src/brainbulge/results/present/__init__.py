@@ -1,0 +1,1 @@
+"""Presentation: figures, sections, 3D views and the HTML and Markdown reports."""

@@ -1,0 +1,1 @@
+"""The output folder: claiming it safely, its manifest, run records and run files."""
