@@ -137,3 +137,37 @@ def test_offset_mesh_has_no_vertex_at_the_edge_and_the_edge_starts_outside_the_t
     form = MixedForm(hemidisk_problem(case, mesh), element=case.element)
     edge = SmoothEdgeContact(form, "skull|opening", edges)
     assert np.all(edge.g > 0)
+
+
+def test_opened_skull_gap_is_the_distance_to_the_opened_region():
+    """``S`` opened by a disk of radius ``rho``: ``g = 1 - r`` under the arc, the distance
+    to the nominal edge's ray (end face) in the opening above ``R + rho``, and the rounded
+    corner's distance (centre at ``rho`` from both); ``grad g`` matches central differences."""
+    from bench_edge_2d import OpenedSkull
+
+    rho, half = 0.03, math.radians(30)
+    skull = OpenedSkull(1.0, 60.0, rho)
+    e = np.array([math.cos(half), math.sin(half)])  # the edge's ray in the opening's frame
+    m = np.array([-math.sin(half), math.cos(half)])
+    c = math.sqrt((1 + rho) ** 2 - rho**2) * e + rho * m  # the rounding's centre
+
+    def mesh_frame(p: np.ndarray) -> np.ndarray:  # the opening's centre is on +y
+        return np.array([-p[1], p[0]])
+
+    under = 0.9 * np.array([math.cos(math.radians(50)), math.sin(math.radians(50))])
+    face = 1.3 * e - 0.05 * m  # in the opening, 0.05 from the end face
+    corner = c - 0.02 * (m + e) / math.sqrt(2)  # inside the rounding's quarter, 0.02 off it
+    pts = np.array([mesh_frame(under), mesh_frame(face), mesh_frame(corner)])
+    g, n = skull.gap_and_normal(pts)
+    assert math.isclose(g[0], 0.1, rel_tol=1e-12)
+    assert math.isclose(g[1], 0.05, rel_tol=1e-12)
+    assert math.isclose(g[2], 0.02 - rho, abs_tol=1e-12)  # negative: inside the bone
+    rng = np.random.default_rng(1)
+    x = np.array([-0.5, 0.87]) + 0.15 * rng.standard_normal((200, 2))
+    _, n = skull.gap_and_normal(x)
+    eps = 1e-7
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = eps
+        fd = skull.gap_and_normal(x + d)[0] - skull.gap_and_normal(x - d)[0]
+        np.testing.assert_allclose(fd / (2 * eps), n[:, k], atol=1e-5)

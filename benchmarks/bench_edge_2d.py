@@ -1,0 +1,349 @@
+"""The resolved skull edge in 2D, prototype: one contact constraint against a rounded skull.
+
+The paper's skull ``S = {r >= R, |delta| >= beta/2}`` (``delta`` the angle from the
+opening's centre) with its edge rounded by ``rho``, two ways (``--rounding``):
+
+- ``turned``: the points within ``rho`` of the core ``{R + rho <= r <= R + T - rho,
+  |delta| >= beta/2}`` (``RigidSkull2D`` with a thickness ``T`` far beyond any bulge). The
+  inner surface is the circle ``r = R`` up to the nominal edge angle; there it turns outward
+  on a circle of radius ``rho`` into the end face, ``rho`` inside the opening.
+- ``opened``: ``S`` opened by a disk of radius ``rho`` (:class:`OpenedSkull`): the arc ends
+  about ``rho`` into the bone, the end face stays on the nominal edge's ray.
+
+Either gap ``g`` is the exact signed distance outside the skull (C1). The whole material arc
+(under the skull and in the opening) is in frictionless contact with it (``--law``): by the
+product's exact multipliers at the contact points (``multipliers``), or by a penalty
+``kappa/2 max(-g, 0)^2`` at 5 Gauss points per boundary edge (``penalty``, ``--kappa``), so
+that a point sliding past the edge is released continuously and tissue bulging out cannot
+enter the end face. No held arc, no rezoning, no hotspot relaxation.
+
+Per run: load reached, Newton iterations, wall time, the top-of-bulge displacement ``u_y(0,
+R)`` [R], the largest crossing of the deformed boundary (8 points per boundary segment) into
+the rounded skull and into the sharp ``S`` [R], how far the skull side's material slid along
+the arc [deg], and the smallest ``J`` of the P1 part.
+
+Options: ``--rho`` (in R; the edge's mesh size is ``rho / --hc-ratio`` from 8 degrees
+before to 8 degrees past the edge), ``--h``, ``--full`` (else the half domain, ``u_x = 0`` on
+the symmetry axis), ``--steps`` (equal load steps, grown by the ramp), ``--trust`` (an update
+never moves a vertex more than this fraction of its smallest incident edge; 0: off;
+``--trust-max``: the radius doubles while the residual falls), ``--no-line-search`` (the
+capped step is taken as it is), ``--element``.
+
+Rerun: ``python benchmarks/bench_edge_2d.py --table`` (every row, each in its own process;
+about 30 min on 2 cores alone).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+#: the benchmark's rows: overrides of :data:`DEFAULTS` (docs/design.md's record)
+DEFAULTS = {"alpha": 80.0, "beta": 60.0, "contact": "sliding", "rho": 0.03, "h": 0.05,
+            "half": True, "steps": 40, "trust": 0.2, "element": "mini", "line_search": True,
+            "rounding": "turned", "hc_ratio": 3.0, "law": "multipliers"}
+PENALTY = {"law": "penalty", "line_search": False}
+TABLE = [
+    # the product's exact multipliers at the contact points
+    {}, {"half": False}, {"contact": "noslip"}, {"element": "taylor-hood"},
+    {"steps": 10, "trust": 0.0}, {"h": 0.035}, {"rho": 0.05}, {"rho": 0.015},
+    *({"alpha": a, "beta": 30.0, **v} for a in (60.0, 80.0) for v in (
+        {}, {"line_search": False}, {"line_search": False, "hc_ratio": 5.0},
+        {"rounding": "opened"}, {"element": "taylor-hood", "line_search": False})),
+    # a penalty at 5 Gauss points per boundary edge
+    PENALTY, {**PENALTY, "element": "taylor-hood"},
+    {**PENALTY, "element": "taylor-hood", "half": False},
+    *({"alpha": a, "beta": 30.0, **PENALTY, "element": el} for a in (60.0, 80.0)
+      for el in ("mini", "taylor-hood")),
+]
+THICKNESS = 2.0  # [R]: the skull's thickness, beyond any bulge
+
+
+class OpenedSkull:
+    """``S`` opened by a disk of radius ``rho`` (the union of the disks of radius ``rho``
+    inside ``S``): the arc ends ``rho`` into the bone, the end face stays on the nominal
+    edge ray. ``g = dist(x, E) - rho`` with ``E`` the eroded set ``{r >= R + rho} and
+    {distance from the edge's line >= rho on the skull's side}`` (exact outside ``S``)."""
+
+    def __init__(self, R: float, beta_deg: float, rho: float) -> None:
+        self.R, self.half, self.rho = R, math.radians(beta_deg) / 2, rho
+
+    def gap_and_normal(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R1, rho, h = self.R + self.rho, self.rho, self.half
+        # the opening's frame: centre on +x' (the y axis of the mesh), sides mirrored
+        xr, yr = x[:, 1], -x[:, 0]
+        sgn = np.where(yr < 0, -1.0, 1.0)
+        ya = np.abs(yr)
+        m = np.array([-math.sin(h), math.cos(h)])  # normal of the edge's line, to the bone
+        e = np.array([math.cos(h), math.sin(h)])
+        s = xr * m[0] + ya * m[1]  # signed distance from the edge's line
+        r = np.hypot(xr, ya)
+        # the corner of E: on the circle r = R1, at distance rho from the line
+        tc = math.sqrt(R1**2 - rho**2)
+        cx, cy = tc * e[0] + rho * m[0], tc * e[1] + rho * m[1]
+        # candidate nearest points: radial projection on the circle (if in H), projection on
+        # the line s = rho (if r >= R1 there), the corner
+        px_c, py_c = R1 * xr / np.maximum(r, 1e-300), R1 * ya / np.maximum(r, 1e-300)
+        ok_c = px_c * m[0] + py_c * m[1] >= rho
+        t = xr * e[0] + ya * e[1]
+        px_l, py_l = t * e[0] + rho * m[0], t * e[1] + rho * m[1]
+        ok_l = np.hypot(px_l, py_l) >= R1
+        d_c = np.where(ok_c, np.abs(r - R1), np.inf)
+        d_l = np.where(ok_l, np.abs(s - rho), np.inf)
+        d_k = np.hypot(xr - cx, ya - cy)
+        inside = (r >= R1) & (s >= rho)
+        d = np.minimum(np.minimum(d_c, d_l), d_k)
+        # nearest point and the outward normal (from E to x)
+        use_c = (d_c <= d_l) & (d_c <= d_k)
+        use_l = ~use_c & (d_l <= d_k)
+        qx = np.where(use_c, px_c, np.where(use_l, px_l, cx))
+        qy = np.where(use_c, py_c, np.where(use_l, py_l, cy))
+        dx, dy = xr - qx, ya - qy
+        dist = np.maximum(np.hypot(dx, dy), 1e-300)
+        nx, ny = dx / dist, dy / dist
+        g = np.where(inside, -d, d) - rho
+        nx, ny = np.where(inside, -nx, nx), np.where(inside, -ny, ny)
+        ny = ny * sgn
+        # back to the mesh's frame: x = -y', y = x'
+        return g, np.column_stack([-ny, nx])
+
+
+def mesh(R: float, alpha: float, beta: float, h: float, hc: float, rho: float,
+         band: tuple[float, float] = (8.0, 8.0), half: bool = True):
+    """The hemidisk, or its left half ``90 <= theta <= 180`` deg with the boundary
+    ``symmetry`` on the axis (boundaries ``skull``, ``opening``, ``base``); ``hc`` along the
+    arc within ``band`` degrees (opening side, skull side) of the edge, ``h/5`` at the sector
+    edge's end [length, deg]."""
+    import ngsolve as ngs
+    from netgen.meshing import MeshingParameters
+    from netgen.occ import Glue, OCCGeometry
+
+    from brainbulge.geometry.hemidisk import _edge_mid, _edge_radius, _pie_slice
+
+    lo = 90.0 if half else 0.0
+    edges = [90 + beta / 2] + ([] if half else [90 - beta / 2])
+    sector = [90 + alpha / 2] + ([] if half else [90 - alpha / 2])
+    breaks = sorted({lo, 180.0, *edges, *sector})
+    slices = []
+    for a0, a1 in zip(breaks[:-1], breaks[1:], strict=True):
+        mid = 0.5 * (a0 + a1)
+        face = _pie_slice(R, a0, a1)
+        arc = max(face.edges, key=_edge_radius)
+        arc.name = "opening" if abs(mid - 90) < beta / 2 else "skull"
+        for e in face.edges:
+            if e is arc:
+                continue
+            x, y = _edge_mid(e)
+            if abs(y) < 1e-9 * R:
+                e.name = "base"
+            elif half and abs(x) < 1e-9 * R:
+                e.name = "symmetry"
+        face.faces.name = "swelling" if abs(mid - 90) < alpha / 2 else "tissue"
+        slices.append(face)
+    mp = MeshingParameters(maxh=h, grading=0.25)
+    for e in edges:
+        sgn = 1 if e > 90 else -1
+        a_open, a_skull = e - sgn * band[0], e + sgn * band[1]
+        n = max(2, math.ceil(abs(a_skull - a_open) * math.pi / 180 * R / hc))
+        for k in range(n + 1):
+            t = math.radians(a_open + (a_skull - a_open) * k / n)
+            for depth in (0.0, 2 * hc):
+                rr = R - depth
+                mp.RestrictH(x=rr * math.cos(t), y=rr * math.sin(t), z=0, h=hc)
+    for s in sector:
+        t = math.radians(s)
+        mp.RestrictH(x=R * math.cos(t), y=R * math.sin(t), z=0, h=h / 5)
+    m = ngs.Mesh(OCCGeometry(Glue(slices), dim=2).GenerateMesh(mp=mp))
+    m.Curve(2)
+    return m
+
+
+def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: bool,
+        steps: int, trust: float, element: str = "mini", max_iterations: int = 20,
+        line_search: bool = True, rounding: str = "turned", hc_ratio: float = 3.0,
+        law: str = "multipliers", kappa: float = 1e7, trust_max: float = 0.0) -> dict:
+    import ngsolve as ngs
+
+    from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
+    from brainbulge.geometry.skull2d import RigidSkull2D
+    from brainbulge.materials import preset
+    from brainbulge.model.problem import Contact, Problem
+    from brainbulge.solver import newton as newton_mod
+    from brainbulge.solver.mixed import MixedForm
+    from brainbulge.solver.options import SolverOptions
+    from brainbulge.solver.ramp import NewtonSolver
+
+    R = 1.0
+    hc = rho / hc_ratio
+    m = mesh(R, alpha, beta, h, hc, rho, half=half)
+    skull = (OpenedSkull(R, beta, rho) if rounding == "opened" else
+             RigidSkull2D(R=R, beta_deg=beta, center_deg=90.0, thickness=THICKNESS,
+                          edge_radius=rho))
+    mat = preset("paper")["gray"]
+    materials = {r: mat for r in set(m.GetMaterials())}
+    sym = {0: "symmetry"} if half else {}
+    if contact == "sliding" and law == "penalty":  # the contact is in the energy, below
+        problem = Problem(m, materials, {"swelling": 1.2}, clamped="base",
+                          clamped_components=sym)
+    elif contact == "sliding":
+        problem = Problem(m, materials, {"swelling": 1.2}, clamped="base",
+                          clamped_components=sym,
+                          contacts=[Contact("skull|opening", skull)])
+    else:
+        problem = Problem(m, materials, {"swelling": 1.2}, clamped="base|skull",
+                          clamped_components=sym, contacts=[Contact("opening", skull)])
+    form = MixedForm(problem, element=element)
+    if law == "penalty":
+        # kappa/2 max(-g, 0)^2 over the material arc, at 5 Gauss points per edge for P2
+        u = form.fes.TrialFunction()[0]
+        x = ngs.CF((ngs.x + u[0], ngs.y + u[1]))
+        g = skull.gap(x)
+        form.a += ngs.Variation(0.5 * kappa * ngs.IfPos(-g, g * g, 0)
+                                * ngs.ds("skull|opening", bonus_intorder=5))
+    opt = SolverOptions(steps=steps, hotspot_relaxation=False, max_iterations=max_iterations,
+                        closed_form=law != "penalty")
+    solver = NewtonSolver(form, opt)
+
+    # the trust region: scale each Newton update so that no vertex moves more than
+    # `trust` times its smallest incident edge
+    X = vertex_coordinates(m)
+    els, _ = element_vertices(m)
+    hv = np.full(len(X), np.inf)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        L = np.linalg.norm(X[els[:, a]] - X[els[:, b]], axis=1)
+        np.minimum.at(hv, els[:, a], L)
+        np.minimum.at(hv, els[:, b], L)
+    from brainbulge.geometry.ngsolve_arrays import vertex_dofs
+
+    V = form.fes.components[0]
+    vd = vertex_dofs(V, m) + form.fes.Range(0).start
+    limited = [0]
+    radius = [trust]  # the trust region's radius, in local edge lengths
+    original = newton_mod.Newton._line_search
+
+    def capped(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened):
+        if trust > 0:
+            d = dx.FV().NumPy()[vd]
+            move = np.linalg.norm(d, axis=1) / hv
+            f = radius[0] / max(move.max(), 1e-300)
+            if f < 1:
+                limited[0] += 1
+                dx.data = f * dx
+                dlams = [f * dl for dl in dlams]
+        if not line_search:  # the capped step is taken whatever the residual does
+            x.data = x0 - dx
+            for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
+                pc.lam = l0 - dl
+            trial = self.scaled_norm(self.residual(x))
+            if trust_max > trust:  # the radius grows while the residual falls
+                radius[0] = (min(2 * radius[0], trust_max) if trial < norm
+                             else max(radius[0] / 2, trust))
+            return 1.0, trial, tightened
+        return original(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened)
+
+    newton_mod.Newton._line_search = capped
+    t0 = time.perf_counter()
+    sol = solver.solve()
+    wall = time.perf_counter() - t0
+
+    u = form.output_displacement() if hasattr(form, "output_displacement") else form.u
+    top = float(u(m(0.0, R * (1 - 1e-9)))[1])
+    # the deformed boundary, sampled: crossing into the rounded skull and into sharp S
+    from bench_hard_cases import region_gap
+
+    bnd = [el for el in m.Elements(ngs.BND)
+           if m.GetBoundaries()[el.index] in ("skull", "opening")]
+    pts = []
+    for el in bnd:
+        a, b = (np.array(m[v].point[:2]) for v in el.vertices)
+        for s in np.linspace(0, 1, 9):
+            p = (1 - s) * a + s * b
+            p = R * p / np.linalg.norm(p)  # on the (curved) arc
+            pts.append(p)
+    P = np.array(pts)
+    uP = np.array([u(m(*p * (1 - 1e-12)))[:2] for p in P])
+    xP = P + uP
+    g_round = skull.gap_and_normal(xP)[0]
+    i_worst = int(np.argmin(g_round))
+    theta_ref = np.degrees(np.arctan2(P[:, 1], P[:, 0]))
+    theta_def = np.degrees(np.arctan2(xP[:, 1], xP[:, 0]))
+    skull_side = np.abs(theta_ref - 90) >= beta / 2
+    slide = float(np.max(np.abs(theta_def - theta_ref)[skull_side]))
+    g_sharp = region_gap(R, beta, 90.0, xP)[0]
+    uL = form.output_displacement() if hasattr(form, "output_displacement") else form.u
+    JL = ngs.Det(ngs.Id(2) + ngs.Grad(uL))
+    Jmin = float(np.min(JL(m.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 2), ngs.VOL))))
+    return {"alpha": alpha, "beta": beta, "contact": contact, "rho": rho, "h": h,
+            "half": half, "steps": steps, "trust": trust, "element": element,
+            "converged": sol.converged, "load": round(sol.load, 4),
+            "newton": sol.newton_iterations, "rejected": sol.rejected_steps,
+            "limited": limited[0], "wall_s": round(wall, 1), "top_uy": top,
+            "crossing_round": float(max(-g_round.min(), 0)),
+            "crossing_sharp": float(max(-g_sharp.min(), 0)), "Jmin": Jmin,
+            "slide_deg": slide, "worst_ref_deg": float(theta_ref[i_worst]),
+            "worst_def_deg": float(theta_def[i_worst]),
+            "ndof": form.fes.ndof, "reason": sol.describe()[:160]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--alpha", type=float, default=80)
+    ap.add_argument("--beta", type=float, default=60)
+    ap.add_argument("--contact", default="sliding")
+    ap.add_argument("--rho", type=float, default=0.03)
+    ap.add_argument("--h", type=float, default=0.05)
+    ap.add_argument("--full", action="store_true", help="the full domain, not the half")
+    ap.add_argument("--steps", type=int, default=40)
+    ap.add_argument("--trust", type=float, default=0.2)
+    ap.add_argument("--element", default="mini")
+    ap.add_argument("--no-line-search", action="store_true")
+    ap.add_argument("--rounding", default="turned", choices=("turned", "opened"))
+    ap.add_argument("--hc-ratio", type=float, default=3.0, help="rho / edge mesh size")
+    ap.add_argument("--trust-max", type=float, default=0.0,
+                    help="the trust radius doubles while the residual falls, up to this")
+    ap.add_argument("--law", default="multipliers", choices=("multipliers", "penalty"))
+    ap.add_argument("--kappa", type=float, default=1e7, help="penalty [stress/length]")
+    ap.add_argument("--table", action="store_true", help="every row of TABLE")
+    a = ap.parse_args()
+    if not a.table:
+        print(json.dumps(run(a.alpha, a.beta, a.contact, a.rho, a.h, not a.full, a.steps,
+                             a.trust, a.element,
+                             line_search=not a.no_line_search, rounding=a.rounding,
+                             hc_ratio=a.hc_ratio, law=a.law, kappa=a.kappa,
+                             trust_max=a.trust_max)))
+        return
+    keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
+            "steps", "trust", "line_search", "rounding")
+    print("| " + " | ".join(keys) + " | load | Newton | wall s | u_y top | crossing round / "
+          "sharp | slide deg | J min (P1 part) |")
+    print("|" + "---|" * (len(keys) + 7))
+    for row in TABLE:
+        c = {**DEFAULTS, **row}
+        cmd = [sys.executable, __file__, "--alpha", str(c["alpha"]), "--beta", str(c["beta"]),
+               "--contact", c["contact"], "--rho", str(c["rho"]), "--h", str(c["h"]),
+               "--steps", str(c["steps"]), "--trust", str(c["trust"]), "--element",
+               c["element"], "--rounding", c["rounding"], "--hc-ratio", str(c["hc_ratio"]),
+               "--law", c["law"]]
+        cmd += ([] if c["half"] else ["--full"]) + ([] if c["line_search"]
+                                                    else ["--no-line-search"])
+        out = subprocess.run(cmd, capture_output=True, text=True)
+        cells = " | ".join(str(c[k]) for k in keys)
+        try:
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+        except (IndexError, json.JSONDecodeError):
+            print(f"| {cells} | failed: {out.stderr[-120:]!r} |", flush=True)
+            continue
+        print(f"| {cells} | {r['load']} | {r['newton']} | {r['wall_s']} | {r['top_uy']:.5f} | "
+              f"{r['crossing_round']:.1e} / {r['crossing_sharp']:.1e} | {r['slide_deg']:.2f} | "
+              f"{r['Jmin']:.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    main()
