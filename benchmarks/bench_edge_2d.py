@@ -167,7 +167,8 @@ def mesh(R: float, alpha: float, beta: float, h: float, hc: float, rho: float,
 def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: bool,
         steps: int, trust: float, element: str = "mini", max_iterations: int = 20,
         line_search: bool = True, rounding: str = "turned", hc_ratio: float = 3.0,
-        law: str = "multipliers", kappa: float = 1e7, trust_max: float = 0.0) -> dict:
+        law: str = "multipliers", kappa: float = 1e7, trust_max: float = 0.0,
+        onset: float = 0.0) -> dict:
     import ngsolve as ngs
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
@@ -204,8 +205,13 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         u = form.fes.TrialFunction()[0]
         x = ngs.CF((ngs.x + u[0], ngs.y + u[1]))
         g = skull.gap(x)
-        form.a += ngs.Variation(0.5 * kappa * ngs.IfPos(-g, g * g, 0)
-                                * ngs.ds("skull|opening", bonus_intorder=5))
+        s = ngs.IfPos(-g, -g, 0)  # penetration
+        if onset > 0:  # C2: cubic up to the onset depth, then the quadratic
+            e = ngs.IfPos(s - onset, 0.5 * kappa * (s * s - onset * s + onset**2 / 3),
+                          kappa * s * s * s / (6 * onset))
+        else:
+            e = 0.5 * kappa * s * s
+        form.a += ngs.Variation(e * ngs.ds("skull|opening", bonus_intorder=5))
     opt = SolverOptions(steps=steps, hotspot_relaxation=False, max_iterations=max_iterations,
                         closed_form=law != "penalty")
     solver = NewtonSolver(form, opt)
@@ -309,6 +315,8 @@ def main() -> None:
                     help="the trust radius doubles while the residual falls, up to this")
     ap.add_argument("--law", default="multipliers", choices=("multipliers", "penalty"))
     ap.add_argument("--kappa", type=float, default=1e7, help="penalty [stress/length]")
+    ap.add_argument("--onset", type=float, default=0.0,
+                    help="the penalty's cubic onset depth [R] (C2 law; 0: quadratic)")
     ap.add_argument("--table", action="store_true", help="every row of TABLE")
     a = ap.parse_args()
     if not a.table:
@@ -316,7 +324,7 @@ def main() -> None:
                              a.trust, a.element,
                              line_search=not a.no_line_search, rounding=a.rounding,
                              hc_ratio=a.hc_ratio, law=a.law, kappa=a.kappa,
-                             trust_max=a.trust_max)))
+                             trust_max=a.trust_max, onset=a.onset)))
         return
     keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
             "steps", "trust", "line_search", "rounding")
