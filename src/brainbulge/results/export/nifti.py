@@ -1,0 +1,252 @@
+"""NIfTI maps of a 3D run on the voxel grid of the label image its mesh was built from.
+
+``write_maps(form, bm, out_dir / "maps")`` writes, on the grid of ``bm.image_grid`` (the
+template's for the default brain, the user's segmentation for ``--labels``), in that image's
+own affine (any orientation, oblique included), one ``.nii.gz`` per map of :data:`MAPS`:
+``float32`` with **NaN outside the tissue** (outside the mesh), the masks and label maps
+``uint8`` with 0 there. A voxel takes the value of the solution at its **centre in the
+reference configuration** (the undeformed brain: the maps lie on the image they were made
+from); ``tissue_deformed.nii.gz`` is the tissue label at each voxel centre in the deformed
+configuration (the mesh moved by its vertex displacements), i.e. the swollen, bulged brain.
+
+Each voxel centre is located in the mesh by rasterising the tetrahedra (voxel centres in an
+element's bounding box, tested by their barycentric coordinates in index space, which an
+affine map keeps), and the fields are then evaluated by NGSolve at those element-local
+coordinates (:func:`~brainbulge.results.measures.fields.sample`: P2 displacement, recovered
+gradient, pressure), so a map holds the solution itself, not an interpolation of vertex
+values. NGSolve's own point location (``mesh(x, y, z)``) finds the same elements (a test
+compares them) but costs ~40 us per point on a 111k-tet brain (85 s for the template's
+2.1M voxels), which the rasterisation does in about a second.
+"""
+
+from __future__ import annotations
+
+import gzip
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from brainbulge.geometry.brain.labels import TISSUE_CODES, TISSUES, ImageGrid
+from brainbulge.results.measures.fields import output_fields, sample
+from brainbulge.results.measures.plan_defaults import DAMAGE_THRESHOLDS
+from brainbulge.results.records.run_record import atomic_output
+
+log = logging.getLogger("brainbulge")
+
+#: map file stem -> (field of :func:`~brainbulge.results.measures.fields.output_fields`,
+#: unit, meaning); float32, NaN outside the tissue
+MAPS: dict[str, tuple[str, str, str]] = {
+    "displacement": ("u", "mm", "displacement vector u (x, y, z: the mesh's world RAS+ axes), "
+                     "one 3-vector per voxel (NIfTI intent vector)"),
+    "displacement_magnitude": ("u_magnitude", "mm", "|u|"),
+    "max_principal_strain": ("max_principal_strain", "-",
+                             "maximum principal Green-Lagrange strain"),
+    "radial_stretch": ("lambda_n", "-", "stretch lambda_n along the axon (radial) direction"),
+    "tangential_stretch": ("lambda_t", "-", "largest stretch lambda_t normal to the axon"),
+    "Je": ("Je", "-", "elastic volume ratio Je = J / Js"),
+    "hydrostatic_stress": ("pressure", "kPa", "hydrostatic stress -p, positive in compression"),
+}
+#: the parenchyma's tissues: the damage masks count these
+PARENCHYMA_TISSUES = ("gray", "white", "cerebellum", "brainstem")
+#: gzip level of the maps (1: fast; the NaN and 0 outside the brain compress well anyway)
+COMPRESSION = 1
+#: points evaluated at once (memory: ~0.4 kB per point in the fields' arrays)
+CHUNK = 500_000
+
+
+def damage_mask_name(threshold: float) -> str:
+    """``damage_18`` for a strain threshold of 0.18."""
+    return f"damage_{round(100 * threshold):d}"
+
+
+def map_files() -> dict[str, str]:
+    """Every file of ``maps/`` -> what it holds (docs/outputs.md lists them)."""
+    files = {f"{stem}.nii.gz": f"{meaning} [{unit}], float32, NaN outside the tissue"
+             for stem, (_, unit, meaning) in MAPS.items()}
+    for name, threshold in DAMAGE_THRESHOLDS.items():
+        files[f"{damage_mask_name(threshold)}.nii.gz"] = (
+            f"1 where the maximum principal strain exceeds {threshold:g} ({name} damage "
+            "threshold) in the parenchyma, else 0; uint8")
+    codes = ", ".join(f"{c} {n}" for c, n in TISSUES.items())
+    files["tissue.nii.gz"] = f"tissue at each voxel centre as meshed ({codes}; 0 outside), uint8"
+    files["tissue_deformed.nii.gz"] = ("the same in the deformed configuration (the swollen, "
+                                       "bulged brain), uint8")
+    files["max_principal_strain.png"] = "orthogonal sections of the strain map over the image"
+    return files
+
+
+@dataclass
+class VoxelHits:
+    """Voxel centres located in a mesh: ``index`` (n,) flat voxel indices (C order) of the
+    grid, ``element`` (n,) the element holding each, ``local`` (n, 3) its coordinates on
+    NGSolve's reference tetrahedron (vertex ``i`` of the element at ``e_(i+1)``, the last at
+    the origin)."""
+
+    index: np.ndarray
+    element: np.ndarray
+    local: np.ndarray
+
+
+def locate_voxels(points: np.ndarray, cells: np.ndarray, grid: ImageGrid) -> VoxelHits:
+    """The voxel centres of ``grid`` inside the tetrahedra ``cells`` (vertex numbers into
+    ``points``, mesh mm): the element holding each (the last one, on a shared face) and its
+    local coordinates."""
+    to_index = np.linalg.inv(grid.index_to_mesh())
+    ijk = points @ to_index[:3, :3].T + to_index[:3, 3]
+    shape = np.asarray(grid.shape, dtype=np.int64)
+    element = _rasterise(np.ascontiguousarray(ijk[cells]), shape)
+    index = np.flatnonzero(element >= 0)
+    el = element[index]
+    centres = np.stack(np.unravel_index(index, grid.shape), axis=1).astype(float)
+    corners = ijk[cells[el]]  # (n, 4, 3)
+    T = np.transpose(corners[:, :3] - corners[:, 3:], (0, 2, 1))
+    local = np.linalg.solve(T, (centres - corners[:, 3])[..., None])[..., 0]
+    return VoxelHits(index, el.astype(np.int64), local)
+
+
+def _rasterise(corners: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    from brainbulge.results.export.raster import rasterise_tets
+
+    return rasterise_tets(corners, shape)
+
+
+def mesh_points(mesh, hits: VoxelHits) -> np.ndarray:
+    """NGSolve mesh points (the structured array ``mesh(x, y, z)`` returns) at the located
+    voxel centres: element numbers and local coordinates, for evaluating CoefficientFunctions."""
+    import ngsolve as ngs
+
+    v = np.asarray(mesh.ngmesh.Coordinates())[mesh.ngmesh.Elements3D().NumPy()["nodes"][0, 0]
+                                              - 1]
+    template = mesh(np.array([v[0]]), np.array([v[1]]), np.array([v[2]]), ngs.VOL)
+    pts = np.repeat(template, len(hits.element))
+    pts["x"], pts["y"], pts["z"] = hits.local.T
+    pts["nr"] = hits.element
+    return pts
+
+
+def voxel_values(form, hits: VoxelHits, centre: np.ndarray,
+                 fibres: Callable[[np.ndarray], np.ndarray] | None, gradient
+                 ) -> dict[str, np.ndarray]:
+    """The fields of :data:`MAPS` at the located voxel centres (and ``X``, the centres in
+    mesh coordinates), evaluated in chunks of :data:`CHUNK` points."""
+    pts = mesh_points(form.mesh, hits)
+    keys = {field for field, _, _ in MAPS.values()}
+    out: dict[str, list[np.ndarray]] = {k: [] for k in (*keys, "X")}
+    for start in range(0, len(pts), CHUNK):
+        s = sample(form, pts[start:start + CHUNK], gradient=gradient)
+        fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
+        for k in keys:
+            out[k].append(np.asarray(fields[k], dtype=np.float32))
+        out["X"].append(s.X)
+    return {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in out.items()}
+
+
+def write_maps(form, vertex_points: np.ndarray, cells: np.ndarray, regions: np.ndarray,
+               region_names: list[str], u_vertex: np.ndarray, grid: ImageGrid,
+               out_dir: Path, centre: np.ndarray,
+               fibres: Callable[[np.ndarray], np.ndarray] | None = None,
+               gradient=None, background=None) -> dict[str, Path]:
+    """Write the maps of :func:`map_files` into ``out_dir`` (see the module docstring).
+
+    ``vertex_points``, ``cells``, ``regions``, ``region_names``: the NGSolve mesh as arrays
+    (:class:`~brainbulge.results.export.writers.VertexFields`); ``u_vertex``: the vertex
+    displacements (mm, for the deformed label map); ``background``: the image the figure
+    draws the strain over (a NIfTI image or path; default the tissue map)."""
+    import nibabel as nib
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    hits = locate_voxels(vertex_points, cells, grid)
+    values = voxel_values(form, hits, centre, fibres, gradient)
+    affine = np.asarray(grid.affine, float)
+    n_vox = int(np.prod(grid.shape))
+
+    def image(values_at_hits: np.ndarray, dtype, fill) -> nib.Nifti1Image:
+        flat = np.full((n_vox, *values_at_hits.shape[1:]), fill, dtype=dtype)
+        flat[hits.index] = values_at_hits
+        img = nib.Nifti1Image(flat.reshape(*grid.shape, *values_at_hits.shape[1:]), affine)
+        img.header.set_xyzt_units("mm")
+        img.header.set_sform(affine, code=2)  # aligned to the image the mesh came from
+        img.header.set_qform(affine, code=2)
+        return img
+
+    paths: dict[str, Path] = {}
+
+    def save(name: str, img: nib.Nifti1Image) -> None:
+        paths[name] = save_nifti(img, out_dir / f"{name}.nii.gz")
+
+    for stem, (field, unit, _) in MAPS.items():
+        img = image(values[field], np.float32, np.nan)
+        if stem == "displacement":
+            img.header.set_intent("vector")
+            img = nib.Nifti1Image(np.asanyarray(img.dataobj)[:, :, :, None, :], affine,
+                                  img.header)
+        img.header["descrip"] = f"brainbulge {stem} [{unit}]"[:79].encode()
+        save(stem, img)
+    tissue_of_region = np.array([TISSUE_CODES.get(n.rsplit("_", 1)[0], 0)
+                                 for n in region_names], dtype=np.uint8)
+    tissue = tissue_of_region[regions[hits.element]]
+    parenchyma = np.isin(tissue, [TISSUE_CODES[t] for t in PARENCHYMA_TISSUES])
+    for threshold in DAMAGE_THRESHOLDS.values():
+        damaged = (parenchyma & (values["max_principal_strain"] > threshold)).astype(np.uint8)
+        save(damage_mask_name(threshold), image(damaged, np.uint8, 0))
+    save("tissue", image(tissue, np.uint8, 0))
+    moved = locate_voxels(vertex_points + u_vertex, cells, grid)
+    save("tissue_deformed", image_at(moved, tissue_of_region[regions[moved.element]], grid))
+    paths["figure"] = strain_figure(paths["max_principal_strain"], out_dir /
+                                    "max_principal_strain.png",
+                                    background if background is not None else paths["tissue"])
+    return paths
+
+
+def image_at(hits: VoxelHits, values: np.ndarray, grid: ImageGrid):
+    """A ``uint8`` image of ``grid`` holding ``values`` at the located voxels, 0 elsewhere."""
+    import nibabel as nib
+
+    flat = np.zeros(int(np.prod(grid.shape)), dtype=np.uint8)
+    flat[hits.index] = values
+    img = nib.Nifti1Image(flat.reshape(grid.shape), np.asarray(grid.affine, float))
+    img.header.set_sform(grid.affine, code=2)
+    img.header.set_qform(grid.affine, code=2)
+    return img
+
+
+def save_nifti(img, path: Path) -> Path:
+    """Write ``img`` to ``path`` (``.nii.gz``) atomically, gzip level
+    :data:`COMPRESSION` (nibabel names the format by the file's ending, which the temporary
+    file's name does not keep: the bytes are compressed here)."""
+    with atomic_output(path) as tmp:
+        tmp.write_bytes(gzip.compress(img.to_bytes(), compresslevel=COMPRESSION))
+    return path
+
+
+def strain_figure(strain: Path, path: Path, background) -> Path:
+    """Orthogonal sections of the strain map over ``background`` (nilearn), through the
+    voxel of the largest strain."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    import nibabel as nib
+    from nilearn import plotting
+
+    img = nib.load(str(strain))
+    data = np.asarray(img.dataobj, dtype=np.float32)
+    shown = nib.Nifti1Image(np.nan_to_num(data, nan=0.0), img.affine)
+    finite = np.isfinite(data)
+    peak = np.unravel_index(np.argmax(np.where(finite, data, -np.inf)), data.shape)
+    cut = (img.affine @ np.r_[np.asarray(peak, float), 1.0])[:3]
+    vmax = float(np.nanpercentile(data, 99.9)) if finite.any() else 1.0
+    fig = plt.figure(figsize=(10, 3.6))
+    display = plotting.plot_stat_map(
+        shown, bg_img=background, cut_coords=tuple(cut), display_mode="ortho", figure=fig,
+        threshold=1e-3, vmax=max(vmax, 1e-3), cmap="inferno", symmetric_cbar=False,
+        title="max principal strain (reference configuration)", draw_cross=True)
+    with atomic_output(path) as tmp:
+        display.savefig(str(tmp), dpi=110)
+    display.close()
+    plt.close(fig)
+    return path
