@@ -31,7 +31,12 @@ def main() -> None:
     configure_runtime()
     from brainbulge.geometry.brain import build_brain_mesh, load_brain_mesh, save_brain_mesh
     from brainbulge.model.brain import CraniectomyCase, brain_problem, open_case_flap
-    from brainbulge.results.export.nifti import locate_voxels, voxel_values, write_maps
+    from brainbulge.results.export.nifti import (
+        locate_voxels,
+        map_fields,
+        voxel_values,
+        write_maps,
+    )
     from brainbulge.results.export.writers import vertex_fields
     from brainbulge.results.measures.recovery import recovered_gradient
     from brainbulge.solver import MixedForm
@@ -52,17 +57,19 @@ def main() -> None:
     vf = vertex_fields(form, centre, gradient=G)
     rows["vertex fields (fields.vtu), for reference"] = time.perf_counter() - t
     t = time.perf_counter()
+    vf = vertex_fields(form, centre, gradient=G, corners=map_fields())
+    rows["the same, keeping the maps' fields at the corners"] = time.perf_counter() - t
+    t = time.perf_counter()
     hits = locate_voxels(vf.points, vf.cells, bm.image_grid)
     rows["locate the voxel centres"] = time.perf_counter() - t
     t = time.perf_counter()
-    voxel_values(form, hits, centre, None, G)
-    rows["evaluate the fields there"] = time.perf_counter() - t
+    voxel_values(hits, vf.corner_data)
+    rows["interpolate the fields there"] = time.perf_counter() - t
     t = time.perf_counter()
     locate_voxels(vf.points + vf.point_data["u"], vf.cells, bm.image_grid)
     rows["locate in the deformed mesh"] = time.perf_counter() - t
     t = time.perf_counter()
-    write_maps(form, vf.points, vf.cells, vf.regions, vf.region_names, vf.point_data["u"],
-               bm.image_grid, args.cache / "maps", centre, gradient=G)
+    write_maps(vf, bm.image_grid, args.cache / "maps")
     rows["write_maps (all of maps/)"] = time.perf_counter() - t
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"{len(bm.tets):,} tets, grid {bm.image_grid.shape}, {len(hits.index):,} voxels "

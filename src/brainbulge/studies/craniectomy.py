@@ -223,7 +223,10 @@ def write_brain_outputs(
     if measures is not None:
         summary.update(measures(points))
     del points  # the outputs' largest arrays, gone before the vertex fields
-    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G)
+    from brainbulge.results.export.nifti import map_fields
+
+    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G,
+                       corners=map_fields() if bm.image_grid is not None else ())
     add_contact_fields(vf, form)
     state = "" if sol.converged else f" (stopped at Js = {sol.swelling_reached:.3f})"
     # the field files are compressed (zlib, outside the GIL) while the figures are drawn:
@@ -231,7 +234,7 @@ def write_brain_outputs(
     with ThreadPoolExecutor(max_workers=1) as files:
         written = [files.submit(write_vtu, out_dir / "fields.vtu", vf),
                    files.submit(save_vertex_fields, out_dir / "fields.npz", vf)]
-        write_run_maps(run, vf, out_dir / MAPS_FOLDER, fibres, G)
+        write_run_maps(run, vf, out_dir / MAPS_FOLDER)
         section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
         write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
         for file in written:
@@ -338,8 +341,7 @@ def brain_summary(
     return add_deprecated_aliases(out)
 
 
-def write_run_maps(run: BrainRun, vf: VertexFields, folder: Path, fibres, gradient
-                   ) -> dict[str, Path]:
+def write_run_maps(run: BrainRun, vf: VertexFields, folder: Path) -> dict[str, Path]:
     """The NIfTI maps of a solved scenario (:mod:`~brainbulge.results.export.nifti`) on the
     grid of the label image its mesh came from; none (with a warning) for a mesh that does
     not know that grid (a ``brain.npz`` written before meshes kept it)."""
@@ -358,9 +360,7 @@ def write_run_maps(run: BrainRun, vf: VertexFields, folder: Path, fibres, gradie
         background = datasets.load_mni152_template(resolution=1)
     elif Path(grid.source).is_file():
         background = grid.source  # the user's label image
-    return write_maps(run.form, vf.points, vf.cells, vf.regions, vf.region_names,
-                      vf.point_data["u"], grid, folder, run.bm.envelope.centre_mm(),
-                      fibres=fibres, gradient=gradient, background=background)
+    return write_maps(vf, grid, folder, background=background)
 
 
 def _fibres(case: CraniectomyCase, bm: BrainMesh):

@@ -9,28 +9,30 @@ reference configuration** (the undeformed brain: the maps lie on the image they 
 from); ``tissue_deformed.nii.gz`` is the tissue label at each voxel centre in the deformed
 configuration (the mesh moved by its vertex displacements), i.e. the swollen, bulged brain.
 
-Each voxel centre is located in the mesh by rasterising the tetrahedra (voxel centres in an
-element's bounding box, tested by their barycentric coordinates in index space, which an
-affine map keeps), and the fields are then evaluated by NGSolve at those element-local
-coordinates (:func:`~brainbulge.results.measures.fields.sample`: P2 displacement, recovered
-gradient, pressure), so a map holds the solution itself, not an interpolation of vertex
-values. NGSolve's own point location (``mesh(x, y, z)``) finds the same elements (a test
-compares them) but costs ~40 us per point on a 111k-tet brain (85 s for the template's
-2.1M voxels), which the rasterisation does in about a second.
+Each voxel centre is located in the mesh by rasterising the tetrahedra (numba: the voxel
+centres in an element's bounding box, tested by their barycentric coordinates in index
+space, which an affine map keeps), and takes the vertex fields of ``fields.vtu`` (each
+element's values at its vertices, averaged over the elements sharing a vertex) interpolated
+linearly in that element: what ParaView shows of ``fields.vtu`` at that point, exact at the
+vertices and wherever the field is linear in the element (the MINI element's displacement
+and pressure). NGSolve's own point location (``mesh(x, y, z)``) finds the same elements (a
+test compares them, and the interpolated values against the solution NGSolve evaluates
+there) but costs ~40 us per point on a 111k-tet brain (85 s for the template's 2.0M tissue
+voxels), and NGSolve's evaluation at scattered points ~6 us per point (12 s); located and
+interpolated here they take ~1 s.
 """
 
 from __future__ import annotations
 
 import gzip
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from brainbulge.geometry.brain.labels import TISSUE_CODES, TISSUES, ImageGrid
-from brainbulge.results.measures.fields import output_fields, sample
+from brainbulge.results.export.writers import VertexFields
 from brainbulge.results.measures.plan_defaults import DAMAGE_THRESHOLDS
 from brainbulge.results.records.run_record import atomic_output
 
@@ -53,8 +55,6 @@ MAPS: dict[str, tuple[str, str, str]] = {
 PARENCHYMA_TISSUES = ("gray", "white", "cerebellum", "brainstem")
 #: gzip level of the maps (1: fast; the NaN and 0 outside the brain compress well anyway)
 COMPRESSION = 1
-#: points evaluated at once (memory: ~0.4 kB per point in the fields' arrays)
-CHUNK = 500_000
 
 
 def damage_mask_name(threshold: float) -> str:
@@ -81,86 +81,63 @@ def map_files() -> dict[str, str]:
 @dataclass
 class VoxelHits:
     """Voxel centres located in a mesh: ``index`` (n,) flat voxel indices (C order) of the
-    grid, ``element`` (n,) the element holding each, ``local`` (n, 3) its coordinates on
-    NGSolve's reference tetrahedron (vertex ``i`` of the element at ``e_(i+1)``, the last at
-    the origin)."""
+    grid, ``element`` (n,) the element holding each, ``weights`` (n, 4) its barycentric
+    coordinates there (of the element's vertices in order)."""
 
     index: np.ndarray
     element: np.ndarray
-    local: np.ndarray
+    weights: np.ndarray
 
 
 def locate_voxels(points: np.ndarray, cells: np.ndarray, grid: ImageGrid) -> VoxelHits:
     """The voxel centres of ``grid`` inside the tetrahedra ``cells`` (vertex numbers into
-    ``points``, mesh mm): the element holding each (the last one, on a shared face) and its
-    local coordinates."""
+    ``points``, mesh mm): the element holding each (the last one, on a shared face) and the
+    barycentric coordinates of the centre in it."""
+    from brainbulge.results.export.raster import barycentric_weights, rasterise_tets
+
     to_index = np.linalg.inv(grid.index_to_mesh())
     ijk = points @ to_index[:3, :3].T + to_index[:3, 3]
     shape = np.asarray(grid.shape, dtype=np.int64)
-    element = _rasterise(np.ascontiguousarray(ijk[cells]), shape)
+    corners = np.ascontiguousarray(ijk[cells])
+    element = rasterise_tets(corners, shape)
     index = np.flatnonzero(element >= 0)
-    el = element[index]
-    centres = np.stack(np.unravel_index(index, grid.shape), axis=1).astype(float)
-    corners = ijk[cells[el]]  # (n, 4, 3)
-    T = np.transpose(corners[:, :3] - corners[:, 3:], (0, 2, 1))
-    local = np.linalg.solve(T, (centres - corners[:, 3])[..., None])[..., 0]
-    return VoxelHits(index, el.astype(np.int64), local)
+    el = element[index].astype(np.int64)
+    return VoxelHits(index, el, barycentric_weights(corners, el, index, shape))
 
 
-def _rasterise(corners: np.ndarray, shape: np.ndarray) -> np.ndarray:
-    from brainbulge.results.export.raster import rasterise_tets
-
-    return rasterise_tets(corners, shape)
-
-
-def mesh_points(mesh, hits: VoxelHits) -> np.ndarray:
-    """NGSolve mesh points (the structured array ``mesh(x, y, z)`` returns) at the located
-    voxel centres: element numbers and local coordinates, for evaluating CoefficientFunctions."""
-    import ngsolve as ngs
-
-    v = np.asarray(mesh.ngmesh.Coordinates())[mesh.ngmesh.Elements3D().NumPy()["nodes"][0, 0]
-                                              - 1]
-    template = mesh(np.array([v[0]]), np.array([v[1]]), np.array([v[2]]), ngs.VOL)
-    pts = np.repeat(template, len(hits.element))
-    pts["x"], pts["y"], pts["z"] = hits.local.T
-    pts["nr"] = hits.element
-    return pts
+def map_fields() -> tuple[str, ...]:
+    """The vertex fields the maps are made of (``vertex_fields(corners=map_fields())``)."""
+    return tuple(dict.fromkeys(field for field, _, _ in MAPS.values()))
 
 
-def voxel_values(form, hits: VoxelHits, centre: np.ndarray,
-                 fibres: Callable[[np.ndarray], np.ndarray] | None, gradient
+def voxel_values(hits: VoxelHits, corner_data: dict[str, np.ndarray]
                  ) -> dict[str, np.ndarray]:
-    """The fields of :data:`MAPS` at the located voxel centres (and ``X``, the centres in
-    mesh coordinates), evaluated in chunks of :data:`CHUNK` points."""
-    pts = mesh_points(form.mesh, hits)
-    keys = {field for field, _, _ in MAPS.values()}
-    out: dict[str, list[np.ndarray]] = {k: [] for k in (*keys, "X")}
-    for start in range(0, len(pts), CHUNK):
-        s = sample(form, pts[start:start + CHUNK], gradient=gradient)
-        fields = output_fields(s, centre, None if fibres is None else fibres(s.X))
-        for k in keys:
-            out[k].append(np.asarray(fields[k], dtype=np.float32))
-        out["X"].append(s.X)
-    return {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in out.items()}
+    """The fields of :data:`MAPS` at the located voxel centres: the values at the vertices of
+    the element holding each (``corner_data``, (ne, 4, ...): the element's own, not averaged
+    with its neighbours') interpolated linearly, float32. Exact where the field is linear in
+    the element (the MINI element's displacement and pressure) and at the vertices."""
+    w = hits.weights.astype(np.float32)
+    out = {}
+    for field in map_fields():
+        v = corner_data[field][hits.element]  # (n, 4, ...)
+        out[field] = (np.einsum("nk,nk->n", w, v) if v.ndim == 2
+                      else np.einsum("nk,nkc->nc", w, v))
+    return out
 
 
-def write_maps(form, vertex_points: np.ndarray, cells: np.ndarray, regions: np.ndarray,
-               region_names: list[str], u_vertex: np.ndarray, grid: ImageGrid,
-               out_dir: Path, centre: np.ndarray,
-               fibres: Callable[[np.ndarray], np.ndarray] | None = None,
-               gradient=None, background=None) -> dict[str, Path]:
-    """Write the maps of :func:`map_files` into ``out_dir`` (see the module docstring).
-
-    ``vertex_points``, ``cells``, ``regions``, ``region_names``: the NGSolve mesh as arrays
-    (:class:`~brainbulge.results.export.writers.VertexFields`); ``u_vertex``: the vertex
-    displacements (mm, for the deformed label map); ``background``: the image the figure
-    draws the strain over (a NIfTI image or path; default the tissue map)."""
+def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
+               ) -> dict[str, Path]:
+    """Write the maps of :func:`map_files` into ``out_dir`` (see the module docstring) from
+    the vertex fields ``vf`` (those of ``fields.vtu``, with the :func:`map_fields` at each
+    element's own vertices: ``vertex_fields(corners=map_fields())``); ``background``: the image the
+    figure draws the strain over (a NIfTI image or path; default the tissue map)."""
     import nibabel as nib
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    hits = locate_voxels(vertex_points, cells, grid)
-    values = voxel_values(form, hits, centre, fibres, gradient)
+    cells, regions, region_names = vf.cells, vf.regions, vf.region_names
+    hits = locate_voxels(vf.points, cells, grid)
+    values = voxel_values(hits, vf.corner_data)
     affine = np.asarray(grid.affine, float)
     n_vox = int(np.prod(grid.shape))
 
@@ -194,7 +171,7 @@ def write_maps(form, vertex_points: np.ndarray, cells: np.ndarray, regions: np.n
         damaged = (parenchyma & (values["max_principal_strain"] > threshold)).astype(np.uint8)
         save(damage_mask_name(threshold), image(damaged, np.uint8, 0))
     save("tissue", image(tissue, np.uint8, 0))
-    moved = locate_voxels(vertex_points + u_vertex, cells, grid)
+    moved = locate_voxels(vf.points + vf.point_data["u"], cells, grid)
     save("tissue_deformed", image_at(moved, tissue_of_region[regions[moved.element]], grid))
     paths["figure"] = strain_figure(paths["max_principal_strain"], out_dir /
                                     "max_principal_strain.png",

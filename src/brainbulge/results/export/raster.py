@@ -67,3 +67,24 @@ def rasterise_tets(corners: np.ndarray, shape: np.ndarray) -> np.ndarray:  # pra
                             and 1.0 - l0 - l1 - l2 >= INSIDE_TOLERANCE):
                         element[(i * ny + j) * nz + k] = e
     return element
+
+
+@numba.njit(cache=True)
+def barycentric_weights(corners: np.ndarray, element: np.ndarray, index: np.ndarray,
+                        shape: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """(n, 4) barycentric coordinates of the voxel centres ``index`` (flat, C order) in their
+    tetrahedra ``element`` (corner positions ``corners`` in voxel index space)."""
+    ny, nz = shape[1], shape[2]
+    out = np.empty((index.shape[0], 4))
+    for n in range(index.shape[0]):
+        flat = index[n]
+        p = np.array([flat // (ny * nz), (flat // nz) % ny, flat % nz], dtype=np.float64)
+        c = corners[element[n]]
+        T = np.empty((3, 3))
+        for d in range(3):
+            for v in range(3):
+                T[d, v] = c[v, d] - c[3, d]
+        lam = np.linalg.solve(T, p - c[3])
+        out[n, 0], out[n, 1], out[n, 2] = lam[0], lam[1], lam[2]
+        out[n, 3] = 1.0 - lam[0] - lam[1] - lam[2]
+    return out
