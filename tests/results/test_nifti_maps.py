@@ -189,3 +189,26 @@ def test_a_mesh_without_its_image_grid_gives_no_maps(oblique, tmp_path, caplog) 
     assert not (tmp_path / "maps").exists()
     assert "no NIfTI maps" in caplog.text
     assert (tmp_path / "summary.json").is_file()
+
+
+def test_the_study_report_shows_each_scenarios_strain_map(oblique, tmp_path) -> None:
+    import shutil
+
+    from brainbulge.results.present.craniectomy_report import write_report
+
+    scenario = tmp_path / "left-flap_both-swelling"
+    shutil.copytree(oblique["maps"], scenario / "maps")
+    write_report(tmp_path, [{"name": scenario.name}], [{"complete": True}])
+    report = (tmp_path / "report.md").read_text()
+    assert f"]({scenario.name}/maps/max_principal_strain.png)" in report
+    html = (tmp_path / "report.html").read_text()
+    assert html.count("data:image/png;base64") >= 1  # inlined: the page opens offline
+
+
+def test_docs_list_every_map() -> None:
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "outputs.md").read_text()
+    section = page.split("## NIfTI maps", 1)[1].split("\n## ", 1)[0]
+    listed = {line.split("`")[1] for line in section.splitlines() if line.startswith("| `")}
+    assert listed == set(map_files())

@@ -89,10 +89,12 @@ class VoxelHits:
     weights: np.ndarray
 
 
-def locate_voxels(points: np.ndarray, cells: np.ndarray, grid: ImageGrid) -> VoxelHits:
+def locate_voxels(points: np.ndarray, cells: np.ndarray, grid: ImageGrid,
+                  weights: bool = True) -> VoxelHits:
     """The voxel centres of ``grid`` inside the tetrahedra ``cells`` (vertex numbers into
-    ``points``, mesh mm): the element holding each (the last one, on a shared face) and the
-    barycentric coordinates of the centre in it."""
+    ``points``, mesh mm): the element holding each (the last one, on a shared face) and,
+    with ``weights``, the barycentric coordinates of the centre in it (else an empty
+    array)."""
     from brainbulge.results.export.raster import barycentric_weights, rasterise_tets
 
     to_index = np.linalg.inv(grid.index_to_mesh())
@@ -102,6 +104,8 @@ def locate_voxels(points: np.ndarray, cells: np.ndarray, grid: ImageGrid) -> Vox
     element = rasterise_tets(corners, shape)
     index = np.flatnonzero(element >= 0)
     el = element[index].astype(np.int64)
+    if not weights:
+        return VoxelHits(index, el, np.zeros((0, 4)))
     return VoxelHits(index, el, barycentric_weights(corners, el, index, shape))
 
 
@@ -171,7 +175,7 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
         damaged = (parenchyma & (values["max_principal_strain"] > threshold)).astype(np.uint8)
         save(damage_mask_name(threshold), image(damaged, np.uint8, 0))
     save("tissue", image(tissue, np.uint8, 0))
-    moved = locate_voxels(vf.points + vf.point_data["u"], cells, grid)
+    moved = locate_voxels(vf.points + vf.point_data["u"], cells, grid, weights=False)
     save("tissue_deformed", image_at(moved, tissue_of_region[regions[moved.element]], grid))
     paths["figure"] = strain_figure(paths["max_principal_strain"], out_dir /
                                     "max_principal_strain.png",

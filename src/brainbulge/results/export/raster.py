@@ -78,13 +78,16 @@ def barycentric_weights(corners: np.ndarray, element: np.ndarray, index: np.ndar
     out = np.empty((index.shape[0], 4))
     for n in range(index.shape[0]):
         flat = index[n]
-        p = np.array([flat // (ny * nz), (flat // nz) % ny, flat % nz], dtype=np.float64)
         c = corners[element[n]]
-        T = np.empty((3, 3))
-        for d in range(3):
-            for v in range(3):
-                T[d, v] = c[v, d] - c[3, d]
-        lam = np.linalg.solve(T, p - c[3])
-        out[n, 0], out[n, 1], out[n, 2] = lam[0], lam[1], lam[2]
-        out[n, 3] = 1.0 - lam[0] - lam[1] - lam[2]
+        px = flat // (ny * nz) - c[3, 0]
+        py = (flat // nz) % ny - c[3, 1]
+        pz = flat % nz - c[3, 2]
+        a, b, cc = c[0, 0] - c[3, 0], c[1, 0] - c[3, 0], c[2, 0] - c[3, 0]
+        d_, e_, f = c[0, 1] - c[3, 1], c[1, 1] - c[3, 1], c[2, 1] - c[3, 1]
+        g, h, k_ = c[0, 2] - c[3, 2], c[1, 2] - c[3, 2], c[2, 2] - c[3, 2]
+        inv = 1.0 / (a * (e_ * k_ - f * h) - b * (d_ * k_ - f * g) + cc * (d_ * h - e_ * g))
+        l0 = ((e_ * k_ - f * h) * px + (cc * h - b * k_) * py + (b * f - cc * e_) * pz) * inv
+        l1 = ((f * g - d_ * k_) * px + (a * k_ - cc * g) * py + (cc * d_ - a * f) * pz) * inv
+        l2 = ((d_ * h - e_ * g) * px + (b * g - a * h) * py + (a * e_ - b * d_) * pz) * inv
+        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = l0, l1, l2, 1.0 - l0 - l1 - l2
     return out
