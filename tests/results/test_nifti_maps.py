@@ -212,3 +212,14 @@ def test_docs_list_every_map() -> None:
     section = page.split("## NIfTI maps", 1)[1].split("\n## ", 1)[0]
     listed = {line.split("`")[1] for line in section.splitlines() if line.startswith("| `")}
     assert listed == set(map_files())
+
+
+def test_a_mesh_file_keeps_its_image_grid(oblique, tmp_path) -> None:
+    from brainbulge.geometry.brain import load_brain_mesh, save_brain_mesh
+
+    grid = oblique["run"].bm.image_grid
+    save_brain_mesh(oblique["run"].bm, tmp_path, figures=False)
+    loaded = load_brain_mesh(tmp_path / "brain.npz").image_grid
+    assert loaded.shape == grid.shape and loaded.source == str(oblique["path"].resolve())
+    np.testing.assert_array_equal(loaded.affine, grid.affine)
+    np.testing.assert_array_equal(loaded.to_mesh, grid.to_mesh)
