@@ -223,3 +223,17 @@ def test_a_mesh_file_keeps_its_image_grid(oblique, tmp_path) -> None:
     assert loaded.shape == grid.shape and loaded.source == str(oblique["path"].resolve())
     np.testing.assert_array_equal(loaded.affine, grid.affine)
     np.testing.assert_array_equal(loaded.to_mesh, grid.to_mesh)
+
+
+def test_a_scaled_brain_still_lies_on_its_image(oblique) -> None:
+    """``brain_volume_ml`` scales the mesh about the envelope's centre: the grid carries the
+    scaling, so the voxels located in the scaled mesh are still the image's tissue."""
+    image = load_tissue_image(oblique["path"], "synthseg")
+    bm = build_brain_mesh(image, target_tets=1000, brain_volume_ml=900.0)
+    assert not np.allclose(bm.image_grid.to_mesh, np.eye(4))
+    np.testing.assert_allclose(bm.image_grid.affine, oblique["affine"], atol=1e-6)  # float32 header
+    hits = locate_voxels(bm.nodes_mm, bm.tets, bm.image_grid, weights=False)
+    mapped = np.zeros(oblique["shape"], dtype=bool)
+    mapped.ravel()[hits.index] = True
+    brain = np.asanyarray(nib.load(oblique["path"]).dataobj) > 0
+    assert 2 * np.sum(brain & mapped) / (brain.sum() + mapped.sum()) > 0.9
