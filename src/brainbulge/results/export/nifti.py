@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import gzip
 import logging
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,6 +138,7 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
     figure draws the strain over (a NIfTI image or path; default the tissue map)."""
     import nibabel as nib
 
+    started = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     cells, regions, region_names = vf.cells, vf.regions, vf.region_names
@@ -180,6 +182,8 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
     paths["figure"] = strain_figure(paths["max_principal_strain"], out_dir /
                                     "max_principal_strain.png",
                                     background if background is not None else paths["tissue"])
+    log.info("NIfTI maps: %d voxels of a %s grid in %.1f s", len(hits.index),
+             " x ".join(map(str, grid.shape)), time.perf_counter() - started)
     return paths
 
 
