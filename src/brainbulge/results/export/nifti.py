@@ -1,6 +1,7 @@
 """NIfTI maps of a 3D run on the voxel grid of the label image its mesh was built from.
 
-``write_maps(form, bm, out_dir / "maps")`` writes, on the grid of ``bm.image_grid`` (the
+``write_maps(vf, bm.image_grid, out_dir / "maps")`` writes, on the grid of the mesh's label
+image (``bm.image_grid``: the
 template's for the default brain, the user's segmentation for ``--labels``), in that image's
 own affine (any orientation, oblique included), one ``.nii.gz`` per map of :data:`MAPS`:
 ``float32`` with **NaN outside the tissue** (outside the mesh), the masks and label maps
@@ -11,15 +12,15 @@ configuration (the mesh moved by its vertex displacements), i.e. the swollen, bu
 
 Each voxel centre is located in the mesh by rasterising the tetrahedra (numba: the voxel
 centres in an element's bounding box, tested by their barycentric coordinates in index
-space, which an affine map keeps), and takes the vertex fields of ``fields.vtu`` (each
-element's values at its vertices, averaged over the elements sharing a vertex) interpolated
-linearly in that element: what ParaView shows of ``fields.vtu`` at that point, exact at the
-vertices and wherever the field is linear in the element (the MINI element's displacement
-and pressure). NGSolve's own point location (``mesh(x, y, z)``) finds the same elements (a
-test compares them, and the interpolated values against the solution NGSolve evaluates
-there) but costs ~40 us per point on a 111k-tet brain (85 s for the template's 2.0M tissue
+space, which an affine map keeps), and takes the fields at that element's own vertices
+(computed for ``fields.vtu``, before it averages them over the elements sharing a vertex)
+interpolated linearly: exact at the vertices and wherever the field is linear in the
+element (the MINI element's displacement and pressure), one side's value at a tissue
+interface. NGSolve's own point location (``mesh(x, y, z)``) finds the same elements (a test
+compares them, and the interpolated values against the solution NGSolve evaluates there)
+but costs ~40 us per point on a 111k-tet brain (85 s for the template's 2.0M tissue
 voxels), and NGSolve's evaluation at scattered points ~6 us per point (12 s); located and
-interpolated here they take ~1 s.
+interpolated here they take ~3 s (docs/design.md, "NIfTI maps").
 """
 
 from __future__ import annotations
@@ -144,17 +145,9 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
     cells, regions, region_names = vf.cells, vf.regions, vf.region_names
     hits = locate_voxels(vf.points, cells, grid)
     values = voxel_values(hits, vf.corner_data)
-    affine = np.asarray(grid.affine, float)
-    n_vox = int(np.prod(grid.shape))
 
     def image(values_at_hits: np.ndarray, dtype, fill) -> nib.Nifti1Image:
-        flat = np.full((n_vox, *values_at_hits.shape[1:]), fill, dtype=dtype)
-        flat[hits.index] = values_at_hits
-        img = nib.Nifti1Image(flat.reshape(*grid.shape, *values_at_hits.shape[1:]), affine)
-        img.header.set_xyzt_units("mm")
-        img.header.set_sform(affine, code=2)  # aligned to the image the mesh came from
-        img.header.set_qform(affine, code=2)
-        return img
+        return grid_image(grid, hits, values_at_hits.astype(dtype), fill)
 
     paths: dict[str, Path] = {}
 
@@ -165,7 +158,7 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
         img = image(values[field], np.float32, np.nan)
         if stem == "displacement":
             img.header.set_intent("vector")
-            img = nib.Nifti1Image(np.asanyarray(img.dataobj)[:, :, :, None, :], affine,
+            img = nib.Nifti1Image(np.asanyarray(img.dataobj)[:, :, :, None, :], img.affine,
                                   img.header)
         img.header["descrip"] = f"brainbulge {stem} [{unit}]"[:79].encode()
         save(stem, img)
@@ -178,7 +171,7 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
         save(damage_mask_name(threshold), image(damaged, np.uint8, 0))
     save("tissue", image(tissue, np.uint8, 0))
     moved = locate_voxels(vf.points + vf.point_data["u"], cells, grid, weights=False)
-    save("tissue_deformed", image_at(moved, tissue_of_region[regions[moved.element]], grid))
+    save("tissue_deformed", grid_image(grid, moved, tissue_of_region[regions[moved.element]], 0))
     paths["figure"] = strain_figure(paths["max_principal_strain"], out_dir /
                                     "max_principal_strain.png",
                                     background if background is not None else paths["tissue"])
@@ -187,15 +180,19 @@ def write_maps(vf: VertexFields, grid: ImageGrid, out_dir: Path, background=None
     return paths
 
 
-def image_at(hits: VoxelHits, values: np.ndarray, grid: ImageGrid):
-    """A ``uint8`` image of ``grid`` holding ``values`` at the located voxels, 0 elsewhere."""
+def grid_image(grid: ImageGrid, hits: VoxelHits, values: np.ndarray, fill):
+    """An image of ``grid`` (its shape, its affine as sform and qform, aligned to the image
+    the mesh came from; mm) holding ``values`` (n, ...) at the located voxels, ``fill``
+    elsewhere, in ``values``' type."""
     import nibabel as nib
 
-    flat = np.zeros(int(np.prod(grid.shape)), dtype=np.uint8)
+    flat = np.full((int(np.prod(grid.shape)), *values.shape[1:]), fill, dtype=values.dtype)
     flat[hits.index] = values
-    img = nib.Nifti1Image(flat.reshape(grid.shape), np.asarray(grid.affine, float))
-    img.header.set_sform(grid.affine, code=2)
-    img.header.set_qform(grid.affine, code=2)
+    affine = np.asarray(grid.affine, float)
+    img = nib.Nifti1Image(flat.reshape(*grid.shape, *values.shape[1:]), affine)
+    img.header.set_xyzt_units("mm")
+    img.header.set_sform(affine, code=2)
+    img.header.set_qform(affine, code=2)
     return img
 
 
