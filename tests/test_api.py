@@ -84,3 +84,23 @@ def test_importing_brainbulge_loads_neither_the_api_nor_ngsolve() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()
     assert out == ["[]", "True"]
+
+
+@pytest.mark.slow
+def test_the_brain_in_one_call(tmp_path) -> None:
+    """``brainbulge.brain`` on a mesh file: the command's folder with its NIfTI maps; in one
+    load step the toy stops short of full load (a few minutes of halved steps), and the
+    result says so, its files kept, as the command's exit 4 does."""
+    from toy_brain import toy_mesh
+
+    toy_mesh(tmp_path / "mesh")
+    r = brainbulge.brain(mesh=str(tmp_path / "mesh" / "brain.npz"), flap="custom", steps=1,
+                         out=tmp_path / "run")
+    assert r.converged == r.summary["converged"] and r.folder == tmp_path / "run"
+    status = json.loads((r.folder / "status.json").read_text())["status"]
+    assert status == ("complete" if r.converged else "incomplete")
+    assert {"midline_shift_mm", "bulge_volume_ml"} <= set(r.summary)
+    assert (r.folder / "maps" / "max_principal_strain.nii.gz").is_file()
+    assert r.fields["points"].shape[1] == 3
+    with pytest.raises(InputError, match="tets"):  # the command's rule: one mesh source
+        brainbulge.brain(mesh=str(tmp_path / "mesh" / "brain.npz"), tets=5000)
