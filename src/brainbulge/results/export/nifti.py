@@ -205,9 +205,13 @@ def save_nifti(img, path: Path) -> Path:
     return path
 
 
+#: strains below this are left transparent in the figure, so that the image shows through
+FIGURE_THRESHOLD = 0.05
+
+
 def strain_figure(strain: Path, path: Path, background) -> Path:
-    """Orthogonal sections of the strain map over ``background`` (nilearn), through the
-    voxel of the largest strain."""
+    """Orthogonal sections of the strain map over ``background`` (nilearn), the strains above
+    :data:`FIGURE_THRESHOLD` coloured, cut where nilearn finds the largest cluster of them."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -218,15 +222,13 @@ def strain_figure(strain: Path, path: Path, background) -> Path:
     img = nib.load(str(strain))
     data = np.asarray(img.dataobj, dtype=np.float32)
     shown = nib.Nifti1Image(np.nan_to_num(data, nan=0.0), img.affine)
-    finite = np.isfinite(data)
-    peak = np.unravel_index(np.argmax(np.where(finite, data, -np.inf)), data.shape)
-    cut = (img.affine @ np.r_[np.asarray(peak, float), 1.0])[:3]
-    vmax = float(np.nanpercentile(data, 99.9)) if finite.any() else 1.0
+    vmax = float(np.nanpercentile(data, 99.9)) if np.isfinite(data).any() else 1.0
     fig = plt.figure(figsize=(10, 3.6))
     display = plotting.plot_stat_map(
-        shown, bg_img=background, cut_coords=tuple(cut), display_mode="ortho", figure=fig,
-        threshold=1e-3, vmax=max(vmax, 1e-3), cmap="inferno", symmetric_cbar=False,
-        title="max principal strain (reference configuration)", draw_cross=True)
+        shown, bg_img=background, display_mode="ortho", figure=fig,
+        threshold=FIGURE_THRESHOLD, vmax=max(vmax, 2 * FIGURE_THRESHOLD), cmap="inferno",
+        symmetric_cbar=False, draw_cross=False,
+        title=f"max principal strain > {FIGURE_THRESHOLD:g} (reference configuration)")
     with atomic_output(path) as tmp:
         display.savefig(str(tmp), dpi=110)
     display.close()
