@@ -237,3 +237,17 @@ def test_a_scaled_brain_still_lies_on_its_image(oblique) -> None:
     mapped.ravel()[hits.index] = True
     brain = np.asanyarray(nib.load(oblique["path"]).dataobj) > 0
     assert 2 * np.sum(brain & mapped) / (brain.sum() + mapped.sum()) > 0.9
+
+
+def test_the_deformed_label_map_gains_the_swelling_volume(oblique) -> None:
+    """Incompressible tissue that swells by ``swelling_volume_ml`` takes that much more
+    room: the deformed label map counts it in voxels (to the voxels' resolution; on the
+    111k-tet template 60,395 voxels of 1 mm^3 for 60.44 ml)."""
+    import json
+
+    summary = json.loads((oblique["maps"].parent / "summary.json").read_text())
+    voxel_ml = abs(np.linalg.det(oblique["affine"][:3, :3])) / 1000
+    count = {name: np.count_nonzero(np.asanyarray(nib.load(
+        oblique["maps"] / f"{name}.nii.gz").dataobj)) for name in ("tissue", "tissue_deformed")}
+    gained = (count["tissue_deformed"] - count["tissue"]) * voxel_ml
+    assert gained == pytest.approx(summary["swelling_volume_ml"], rel=0.25)
