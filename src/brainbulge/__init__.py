@@ -7,7 +7,8 @@ against a rigid skull with an opening.
 
 Importing the package changes nothing in the process (environment, allocator, ``PATH``);
 the process-wide tuning of a run is :func:`brainbulge.runtime.configure`, which the command
-line calls.
+line and the one-call API (:func:`hemidisk`, :func:`brain`, :func:`study`,
+:mod:`brainbulge.api`, loaded on first use) call.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -17,4 +18,8 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+from brainbulge.lazy import lazy_names
+
+__all__ = ["__version__", "hemidisk", "brain", "study", "Result"]
+__getattr__, __dir__ = lazy_names(__name__, globals(), {
+    "hemidisk": "api", "brain": "api", "study": "api", "Result": "api"})

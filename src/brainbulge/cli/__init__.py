@@ -115,6 +115,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout, sys.stderr = streams
 
 
+def run_parsed(args: argparse.Namespace) -> int:
+    """Run a parsed command (``args.func``) as :func:`main` does: runtime tuning, signals,
+    the output folder's status and lock; errors raised with ``args.debug``. The Python
+    API's entry (:mod:`brainbulge.api`)."""
+    return _main(build_parser(), args)
+
+
 def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     global _RUN
     _setup_logging(args.verbose)

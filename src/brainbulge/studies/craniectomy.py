@@ -2,9 +2,11 @@
 
 ``run_brain(case, out_dir)`` solves one scenario and writes ``summary.json``, ``fields.vtu``
 (ParaView: every output of docs/model.md section 3 plus region and contact status), ``fields.npz``,
-``sections.png`` (transverse and sagittal sections through the flap centre, fixed colour
-ranges) and ``surface.png`` / ``surface.npz`` (the deformed surface seen from above and from
-the flap, :mod:`~brainbulge.results.present.views3d`). A run that stops early keeps the last
+``maps/`` (NIfTI maps on the grid of the label image the mesh came from,
+:mod:`~brainbulge.results.export.nifti`), ``sections.png`` (transverse and sagittal sections
+through the flap centre, fixed colour ranges) and ``surface.png`` / ``surface.npz`` (the
+deformed surface seen from above and from the flap, :mod:`~brainbulge.results.present.views3d`).
+A run that stops early keeps the last
 converged state on disk, marked ``"converged": false``, and raises
 :class:`~brainbulge.errors.ConvergenceError`. While it runs, ``restart.npz`` holds the state
 after the last accepted load step: the same scenario run again into the same directory (after
@@ -89,6 +91,8 @@ SECTION_RANGES = {
     "lambda_n": (0.8, 1.2),
     "lambda_t": (0.8, 1.2),
 }
+#: the folder of a run's NIfTI maps
+MAPS_FOLDER = "maps"
 SCENARIOS = [
     (flap, swell) for flap in ("left", "frontal") for swell in ("both", "left", "right")
 ]
@@ -219,7 +223,10 @@ def write_brain_outputs(
     if measures is not None:
         summary.update(measures(points))
     del points  # the outputs' largest arrays, gone before the vertex fields
-    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G)
+    from brainbulge.results.export.nifti import map_fields
+
+    vf = vertex_fields(form, bm.envelope.centre_mm(), fibres=fibres, gradient=G,
+                       corners=map_fields() if bm.image_grid is not None else ())
     add_contact_fields(vf, form)
     state = "" if sol.converged else f" (stopped at Js = {sol.swelling_reached:.3f})"
     # the field files are compressed (zlib, outside the GIL) while the figures are drawn:
@@ -227,6 +234,7 @@ def write_brain_outputs(
     with ThreadPoolExecutor(max_workers=1) as files:
         written = [files.submit(write_vtu, out_dir / "fields.vtu", vf),
                    files.submit(save_vertex_fields, out_dir / "fields.npz", vf)]
+        write_run_maps(run, vf, out_dir / MAPS_FOLDER)
         section_figure(vf, bm, case, out_dir / "sections.png", title=f"{case.name}{state}")
         write_surface_views(vf, bm, case.flap, out_dir, title=f"{case.name}{state}")
         for file in written:
@@ -331,6 +339,28 @@ def brain_summary(
         out.update(brain_extreme_sites(bm, case.flap, skull, SWELL_SIDES[case.swell], band,
                                        PARENCHYMA, points, u, PEAK_VOLUME_ML * 1000.0))
     return add_deprecated_aliases(out)
+
+
+def write_run_maps(run: BrainRun, vf: VertexFields, folder: Path) -> dict[str, Path]:
+    """The NIfTI maps of a solved scenario (:mod:`~brainbulge.results.export.nifti`) on the
+    grid of the label image its mesh came from; none (with a warning) for a mesh that does
+    not know that grid (a ``brain.npz`` written before meshes kept it)."""
+    from brainbulge.geometry.brain.labels import TEMPLATE_SOURCE
+    from brainbulge.results.export.nifti import write_maps
+
+    grid = run.bm.image_grid
+    if grid is None:
+        log.warning("no NIfTI maps: the mesh does not record the label image it came from; "
+                    "rebuild it with `brainbulge mesh` to get them")
+        return {}
+    background = None
+    if grid.source == TEMPLATE_SOURCE:
+        from nilearn import datasets
+
+        background = datasets.load_mni152_template(resolution=1)
+    elif Path(grid.source).is_file():
+        background = grid.source  # the user's label image
+    return write_maps(vf, grid, folder, background=background)
 
 
 def _fibres(case: CraniectomyCase, bm: BrainMesh):

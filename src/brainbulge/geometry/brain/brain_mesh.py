@@ -28,7 +28,7 @@ from brainbulge.geometry.brain.boundaries import (
 from brainbulge.geometry.brain.defaults import BRAIN_VOLUME_RANGE_ML, VOLUME_OF
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope, intracranial_envelope
 from brainbulge.geometry.brain.interfaces import fit_interfaces
-from brainbulge.geometry.brain.labels import TISSUES, TissueImage
+from brainbulge.geometry.brain.labels import TISSUES, ImageGrid, TissueImage
 from brainbulge.geometry.brain.quality import quality_stats
 from brainbulge.geometry.brain.refine import move_onto_surface, refine_uniformly
 from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane, tag_tissue
@@ -76,6 +76,9 @@ class BrainMesh:
     voxel_volumes_ml: dict[str, float] = field(default_factory=dict)
     timings_s: dict[str, float] = field(default_factory=dict)
     midsagittal: MidSagittalPlane = field(default_factory=MidSagittalPlane)
+    #: the voxel grid of the label image the mesh was built from (None: unknown, e.g. a
+    #: ``brain.npz`` written before meshes kept it); the NIfTI maps are written on it
+    image_grid: ImageGrid | None = None
     #: the Netgen mesh this one was refined from, labelled alike (``keep_unrefined``)
     unrefined: BrainMesh | None = field(default=None, repr=False, compare=False)
 
@@ -316,7 +319,7 @@ def _labelled(nodes: np.ndarray, tets: np.ndarray, tissue: np.ndarray, image: Ti
     voxel["csf"] = envelope.volume_ml() - sum(v for k, v in voxel.items() if k != "csf")
     mesh = BrainMesh(nodes, tets, tissue, side.astype(np.int8), faces, face_tet, base,
                      float(base_z_mm), envelope, voxel_volumes_ml=voxel,
-                     midsagittal=midsagittal)
+                     midsagittal=midsagittal, image_grid=image.grid)
     for s in ("left", "right"):
         mesh.add_flap(unilateral_flap(envelope, s))
     mesh.add_flap(frontal_flap(envelope, nodes, faces, ~base, frontal_area_ratio))

@@ -17,7 +17,7 @@ from brainbulge.geometry.brain.boundaries import Flap, SuperiorBand
 from brainbulge.geometry.brain.brain_mesh import BrainMesh
 from brainbulge.geometry.brain.defaults import EDGE_RADIUS_MM
 from brainbulge.geometry.brain.envelope import IntracranialEnvelope
-from brainbulge.geometry.brain.labels import TISSUES
+from brainbulge.geometry.brain.labels import TISSUES, ImageGrid
 from brainbulge.geometry.brain.regions import SIDES, MidSagittalPlane
 
 log = logging.getLogger("brainbulge")
@@ -139,7 +139,16 @@ def _save_npz(path: Path, mesh: BrainMesh) -> None:
         flaps_json=json.dumps({n: _flap_dict(f) for n, f in mesh.flaps.items()}),
         voxel_volumes_json=json.dumps(mesh.voxel_volumes_ml),
         midsagittal_json=json.dumps(asdict(mesh.midsagittal)),
+        **_grid_arrays(mesh.image_grid),
     )
+
+
+def _grid_arrays(grid: ImageGrid | None) -> dict[str, np.ndarray]:
+    """The label image's grid in ``brain.npz`` (none if unknown)."""
+    if grid is None:
+        return {}
+    return {"image_shape": np.asarray(grid.shape, np.int64), "image_affine": grid.affine,
+            "image_to_mesh": grid.to_mesh, "image_source": np.asarray(grid.source)}
 
 
 def _json_default(o: object) -> object:
@@ -175,6 +184,10 @@ def load_brain_mesh(path: str | Path) -> BrainMesh:
         IntracranialEnvelope(d["envelope_sdf_mm"], d["envelope_affine"]),
         voxel_volumes_ml=json.loads(str(d["voxel_volumes_json"])),
     )
+    if "image_shape" in d:  # meshes written before the grid was kept have none
+        mesh.image_grid = ImageGrid(tuple(int(n) for n in d["image_shape"]),  # type: ignore[arg-type]
+                                    d["image_affine"], d["image_to_mesh"],
+                                    str(d["image_source"]))
     if "midsagittal_json" in d:
         plane = json.loads(str(d["midsagittal_json"]))
         mesh.midsagittal = MidSagittalPlane(tuple(plane["point_mm"]), tuple(plane["normal"]))

@@ -18,10 +18,11 @@ listed (and 0) are background.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,8 @@ TISSUES: dict[int, str] = {
     BRAINSTEM: "brainstem",
 }
 TISSUE_CODES: dict[str, int] = {name: code for code, name in TISSUES.items()}
+#: the ``source`` of the default brain's image grid (:mod:`.template`)
+TEMPLATE_SOURCE = "ICBM152 2009a (nilearn, 1 mm)"
 
 _ASEG: dict[str, list[int]] = {
     # cortex, thalamus, caudate, putamen, pallidum, hippocampus, amygdala, accumbens, ventral DC,
@@ -107,6 +110,13 @@ class TissueImage:
 
     tissue: np.ndarray
     affine: np.ndarray
+    #: the grid of the image as read (kept through :meth:`scaled_about`)
+    grid: ImageGrid | None = None
+
+    def __post_init__(self) -> None:
+        if self.grid is None:
+            shape = tuple(int(n) for n in self.tissue.shape[:3])
+            self.grid = ImageGrid(shape, np.asarray(self.affine, float).copy())  # type: ignore[arg-type]
 
     @property
     def voxel_volume_mm3(self) -> float:
@@ -123,7 +133,37 @@ class TissueImage:
         scale = np.eye(4)
         scale[:3, :3] *= factor
         scale[:3, 3] = np.asarray(centre_mm, float) * (1 - factor)
-        return TissueImage(self.tissue, scale @ self.affine)
+        assert self.grid is not None
+        return TissueImage(self.tissue, scale @ self.affine,
+                           self.grid.scaled_about(factor, centre_mm))
+
+
+@dataclass(frozen=True)
+class ImageGrid:
+    """The voxel grid of the label image a mesh was built from, for maps on that grid.
+
+    ``shape``: (nx, ny, nz) voxels; ``affine``: 4x4 voxel index -> world (mm) matrix of the
+    image's header (what a map written on this grid carries); ``to_mesh``: 4x4 world (mm) ->
+    mesh (mm) matrix, the identity unless the geometry was scaled to a brain volume
+    (``brain_volume_ml``: ``x_mesh = c + s (x - c)``); ``source``: where the image came from
+    (its path, or the template's name)."""
+
+    shape: tuple[int, int, int]
+    affine: np.ndarray
+    to_mesh: np.ndarray = field(default_factory=lambda: np.eye(4))
+    source: str = ""
+
+    def index_to_mesh(self) -> np.ndarray:
+        """4x4 voxel index -> mesh (mm) matrix: a voxel centre ``(i, j, k)`` lies at
+        ``index_to_mesh() @ (i, j, k, 1)`` in the mesh's coordinates."""
+        return np.asarray(self.to_mesh, float) @ np.asarray(self.affine, float)
+
+    def scaled_about(self, factor: float, centre_mm: np.ndarray) -> ImageGrid:
+        """The same grid for a mesh scaled by ``factor`` about ``centre_mm``."""
+        scale = np.eye(4)
+        scale[:3, :3] *= factor
+        scale[:3, 3] = np.asarray(centre_mm, float) * (1 - factor)
+        return ImageGrid(self.shape, self.affine, scale @ self.to_mesh, self.source)
 
 
 def read_label_map(label_map: str | Path | dict[str, list[int]]) -> dict[str, list[int]]:
@@ -234,4 +274,7 @@ def load_tissue_image(
             f"cannot read label image {path}: {type(err).__name__}; "
             "give a NIfTI file (.nii/.nii.gz)"
         ) from None
-    return tissue_image_from_labels(data, img.affine, label_map)
+    image = tissue_image_from_labels(data, img.affine, label_map)
+    assert image.grid is not None
+    image.grid = dataclasses.replace(image.grid, source=str(Path(path).resolve()))
+    return image

@@ -19,7 +19,9 @@ from brainbulge.geometry.brain.labels import (
     CEREBELLUM,
     CSF,
     GRAY,
+    TEMPLATE_SOURCE,
     WHITE,
+    ImageGrid,
     TissueImage,
 )
 
@@ -91,4 +93,7 @@ def icbm152_tissue_image(separate_brainstem: bool = True) -> TissueImage:
     basins = watershed(elevation, markers, mask=parenchyma)
     tissue[basins == 2] = CEREBELLUM
     tissue[basins == 3] = BRAINSTEM if separate_brainstem else CEREBELLUM
-    return TissueImage(tissue, affine)
+    image = TissueImage(tissue, affine)
+    assert image.grid is not None
+    image.grid = ImageGrid(image.grid.shape, image.grid.affine, source=TEMPLATE_SOURCE)
+    return image

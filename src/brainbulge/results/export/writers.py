@@ -10,7 +10,7 @@ deformed shape.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import meshio
@@ -38,6 +38,9 @@ class VertexFields:
     region_names: list[str]
     point_data: dict[str, np.ndarray]
     cell_data: dict[str, np.ndarray]
+    #: fields at each element's own vertices (ne, dim + 1, ...), float32, before averaging
+    #: (those ``vertex_fields(corners=...)`` names: the NIfTI maps interpolate them)
+    corner_data: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def vertex_fields(
@@ -46,10 +49,12 @@ def vertex_fields(
     extra: dict[str, ngs.CoefficientFunction] | None = None,
     fibres: Callable[[np.ndarray], np.ndarray] | None = None,
     gradient: ngs.CoefficientFunction | None = None,
+    corners: tuple[str, ...] = (),
 ) -> VertexFields:
     """Evaluate the outputs of docs/model.md section 3 at the vertices of every element
     (``fibres(X)``: unit axon directions replacing the radial default; ``gradient``: the
-    state's recovered gradient when the caller has it, else computed here)."""
+    state's recovered gradient when the caller has it, else computed here; ``corners``: the
+    fields also kept at each element's own vertices, ``corner_data``)."""
     mesh = form.mesh
     dim = mesh.dim
     points = vertex_coordinates(mesh)
@@ -66,15 +71,17 @@ def vertex_fields(
     vid = cells.ravel()  # the sampled corners, element by element
     count = np.bincount(vid, minlength=len(points)).astype(float)
     point_data, cell_data = {}, {}
-    for name, val in fields.items():
-        val = np.asarray(val, dtype=float)
+    for name, values in fields.items():
+        val = np.asarray(values, dtype=float)
         flat = val.reshape(len(vid), -1)
         acc = np.stack([np.bincount(vid, weights=c, minlength=len(points)) for c in flat.T],
                        axis=1)
         point_data[name] = (acc / count[:, None]).reshape((len(points),) + val.shape[1:])
         cell_data[name] = val.reshape(len(cells), dim + 1, *val.shape[1:]).mean(axis=1)
     cell_data["region"] = regions.astype(float)
-    return VertexFields(points, cells, regions, names, point_data, cell_data)
+    corner_data = {name: np.asarray(fields[name], dtype=np.float32).reshape(
+        len(cells), dim + 1, *np.shape(fields[name])[1:]) for name in corners}
+    return VertexFields(points, cells, regions, names, point_data, cell_data, corner_data)
 
 
 def add_contact_fields(vf: VertexFields, form: MixedForm) -> None:

@@ -4,6 +4,10 @@ the ``brainbulge plan`` parser, which must not load the solver stack to show the
 
 #: maximum principal strain at which 50 % of axons were injured in vitro (Bain & Meaney 2000)
 STRAIN_THRESHOLD = 0.18
+#: the damage thresholds of the maximum principal strain the paper cites (Bain & Meaney 2000:
+#: the optimal thresholds of electrophysiological impairment and of morphological injury in
+#: vivo), one damage mask each in a 3D run's NIfTI maps
+DAMAGE_THRESHOLDS = {"functional": STRAIN_THRESHOLD, "morphological": 0.21}
 #: distances from the flap rim between which the rim measures are taken [mm]
 RIM_BAND_MM = (5.0, 10.0)
 #: flap diameters tried by default [mm]: the 12 cm guideline in the middle

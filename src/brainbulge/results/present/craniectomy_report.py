@@ -83,6 +83,9 @@ def write_report(out_dir: Path, scenarios: list[dict], rows: list[dict]) -> Path
     for sc, r in zip(scenarios, rows, strict=True):
         if r.get("complete"):
             lines += [f"## {sc['name']}", "", f"![{sc['name']}]({sc['name']}/sections.png)", ""]
+            strain_map = f"{sc['name']}/maps/max_principal_strain.png"  # NIfTI maps' figure
+            if (out_dir / strain_map).is_file():
+                lines += [f"![{sc['name']}: strain map]({strain_map})", ""]
     atomic_write_text(out_dir / "report.md", "\n".join(lines))
     write_report_html(out_dir / "report.md")
     return out_dir / "report.md"
