@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from paper_run import MARKED, UP_TO_TOLERANCE, Row, Run, up_to
+from paper_run import BAND, MARKED, Row, Run, band, excess_text
 
 # --- 3D measures ------------------------------------------------------------------------
 SCENARIO_ORDER = [f"{flap}-flap_{side}-swelling" for flap in ("left", "frontal")
@@ -103,9 +103,9 @@ def m_flaps(run: Run) -> Row:
         return Row("no mesh", "not measured", "3D part missing")
     a = v["flaps_cm2"]
     return Row(f"nominal areas: frontal {a['frontal']:.0f} cm2, left {a['left']:.0f} cm2, ratio "
-               f"{a['frontal'] / a['left']:.2f}", "holds"
-               if abs(a["frontal"] / a["left"] - 2) < 0.2 else "differs",
-               "the paper counts removed skull elements; we cut the skull with a cylinder")
+               f"{a['frontal'] / a['left']:.2f}", "by construction",
+               "the flaps' diameters are inputs chosen for the paper's \"twice\"; the paper "
+               "counts removed skull elements, whose ratio 4,279 / 2,494 is 1.72")
 
 
 def _pairs(run: Run, key: str) -> list[tuple[str, float, float]]:
@@ -156,10 +156,14 @@ def _site_text(site: dict) -> str:
 
 def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
                    place: Callable[[dict], bool], place_text: str) -> Row:
-    """Our extremes against the paper's "up to ``paper``" at the place ``place`` accepts
-    (a site, or a peak set given as its median rim distance and share under the flap).
-    Holds when a value that reaches the paper's (:func:`up_to`) sits in that place and is
-    not one element's recurring value, and the 0.1 ml peak set is in that place too."""
+    """Our extremes against the paper's "up to" / "down to" ``paper`` at the place ``place``
+    accepts (a site, or a peak set given as its median rim distance and share under the flap).
+    The primary measure is what the paper's contour plots show at the end of their colour
+    bar and what is stable under refinement: the 0.1 ml peak (``peak_*``; ``p01_*`` for a
+    minimum), the most extreme over the scenarios. It holds when that is within
+    :data:`~paper_run.BAND` of the paper's value (:func:`~paper_run.band`) and its 0.1 ml
+    peak set lies in that place in most scenarios; the single-point and element values are
+    shown beside it (they change by up to 45 % between meshes: not verdicts)."""
     if not run.brain:
         return Row("no result", "not measured", "3D scenarios missing")
     is_max = key.startswith("max_")
@@ -168,24 +172,27 @@ def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
     vals = {n: s for n, s in run.brain.items() if s.get(key) is not None}
     if not vals:
         return Row("no result", "not measured", "3D summaries without this key")
-
-    def reaches(v: float) -> bool:
-        return up_to(v, paper) if stretch else v >= UP_TO_TOLERANCE * paper
-
+    n_vol = pick(vals, key=lambda n: float(vals[n][vol_key]))
+    vol = float(vals[n_vol][vol_key])
     n_pt = pick(vals, key=lambda n: float(vals[n][key]))
     n_el = pick(vals, key=lambda n: float(vals[n].get(f"element_{key}", vals[n][key])))
     pt, el = vals[n_pt], vals[n_el]
     pt_site = pt.get("extreme_sites", {}).get(key)
     el_site = el.get("element_sites", {}).get(key)
     rec_pt, rec_el = _recurring(run, "extreme_sites", key), _recurring(run, "element_sites", key)
-    vol = pick(float(v[vol_key]) for v in vals.values())
-    ours = [f"point {float(pt[key]):.3f} ({n_pt})"]
-    if pt_site:
-        ours[-1] += f" at {_site_text(pt_site)}"
-    if el_site:
-        ours.append(f"element {float(el[f'element_{key}']):.3f} ({n_el}) at "
-                    f"{_site_text(el_site)}")
-    ours.append(f"{'peak (0.1 ml)' if is_max else 'p01'} {vol:.3f}")
+    ours = [f"{'peak (0.1 ml)' if is_max else 'p01'} {vol:.3f} ({n_vol}; "
+            f"{excess_text(vol, paper, stretch)})"]
+    for label, value, site, rec in (
+            ("point", float(pt[key]), pt_site, rec_pt),
+            ("element", float(el.get(f"element_{key}", el[key])), el_site, rec_el)):
+        text = f"{label} {value:.3f} ({n_pt if label == 'point' else n_el})"
+        if site:
+            text += f" at {_site_text(site)}"
+            n_rec = rec.get(str(site["X_mm"]), 1)
+            if n_rec > 1:
+                text += (f", the extreme of one element in {n_rec} of {len(run.brain)} "
+                         "scenarios whatever the flap (an interface singularity)")
+        ours.append(text)
     peak_places = []
     for s in vals.values():
         ps = s.get("extreme_sites", {}).get(key, {}).get("peak_set")
@@ -195,33 +202,22 @@ def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
                                       "depth_mm": ps["median_depth_mm"]}))
     ours.append(f"0.1 ml peak sets {place_text} in {sum(peak_places)} of {len(peak_places)} "
                 "scenarios")
-    good = []
-    notes = []
-    for label, value, site, rec in (
-            ("point", float(pt[key]), pt_site, rec_pt),
-            ("element", float(el.get(f"element_{key}", el[key])), el_site, rec_el)):
-        if site is None:
-            continue
-        n_rec = rec.get(str(site["X_mm"]), 1)
-        good.append((reaches(value), place(site), n_rec > 1))
-        if reaches(value) and n_rec > 1:
-            notes.append(f"the {label} value {value:.3f} belongs to one element that is the "
-                         f"extreme in {n_rec} of {len(run.brain)} scenarios, whatever the flap "
-                         "(an interface singularity of that element, not the bulge's response)")
-        elif reaches(value) and not place(site):
-            notes.append(f"the {label} value {value:.3f} is not {place_text}")
     reasons = []
-    if not any(r for r, _, _ in good):
-        reasons.append(f"below the paper's {paper:g} even in element values: {_swelling_text(run)} "
-                       "of swelling on a mesh far coarser than the paper's (mesh size), and "
-                       "the recovered gradient smooths element values")
-    elif not any(r and p and not rep for r, p, rep in good):
-        reasons.extend(notes)
-    if peak_places and sum(peak_places) < len(peak_places):
+    where = band(vol, paper, stretch)
+    if where != "within":
+        reasons.append(f"{where} the paper's {paper:g}: the 0.1 ml {'peak' if is_max else 'p01'}"
+                       f" reaches {excess_text(vol, paper, stretch)} (band +-{BAND:.0%}); "
+                       f"{SENSITIVITY}")
+    if peak_places and 2 * sum(peak_places) <= len(peak_places):
         reasons.append(f"the 0.1 ml peak set is not {place_text} in "
-                       f"{len(peak_places) - sum(peak_places)} scenarios")
-    holds = not reasons
-    return Row("; ".join(ours), "holds" if holds else "differs", "; ".join(reasons))
+                       f"{len(peak_places) - sum(peak_places)} of {len(peak_places)} scenarios")
+    return Row("; ".join(ours), "differs" if reasons else "holds", "; ".join(reasons))
+
+
+#: what the 3D sensitivity study (benchmarks/bench_sensitivity_3d.py) found for the
+#: magnitudes, quoted in every 3D magnitude row that differs
+SENSITIVITY = ("cause not found: see the sensitivity study in docs/performance.md (edge radius, "
+               "superior band, base height, CSF stiffness varied one at a time)")
 
 
 def _swelling_text(run: Run) -> str:
@@ -273,30 +269,19 @@ def m_tangential_28(run: Run) -> Row:
     one = {n: s for n, s in run.brain.items() if "both" not in n}
     if not one:
         return Row("no result", "not measured", "3D scenarios missing")
-    rec = _recurring(run, "element_sites", "max_tangential_stretch")
-
-    def fair(s: dict) -> float:
-        """The larger of the point and the element value, the latter unless its element is
-        the extreme in several scenarios."""
-        el = s.get("element_sites", {}).get("max_tangential_stretch")
-        v = float(s["max_tangential_stretch"])
-        if el and rec.get(str(el["X_mm"]), 1) == 1:
-            v = max(v, float(s["element_max_tangential_stretch"]))
-        return v
-
-    n = max(one, key=lambda k: fair(one[k]))
+    n = max(one, key=lambda k: float(one[k]["peak_tangential_stretch"]))
     s = one[n]
     white = float(s.get("white_matter_volume_ml", 0)) * 2
     sw = float(s["swelling_volume_ml"])
+    peak = float(s["peak_tangential_stretch"])
     elem = float(s.get("element_max_tangential_stretch", s["max_tangential_stretch"]))
-    ok = up_to(fair(s), 1.3)
+    where = band(peak, 1.3)
     return Row(f"one hemisphere swelling {sw:.1f} ml ({100 * sw / white:.1f} % of all white "
-               f"matter): max lambda_t {float(s['max_tangential_stretch']):.3f}, element "
-               f"values {elem:.3f}, peak {float(s['peak_tangential_stretch']):.3f} ({n})",
-               "holds" if ok else "differs",
-               "" if ok else "the swelling volume matches; the stretch stays below 1.3 but "
-               "for elements that are the extreme in several scenarios (see the tangential "
-               "row above)")
+               f"matter): peak (0.1 ml) lambda_t {peak:.3f} ({excess_text(peak, 1.3)}), "
+               f"point {float(s['max_tangential_stretch']):.3f}, element {elem:.3f} ({n})",
+               "holds" if where == "within" else "differs",
+               "" if where == "within" else f"{where} the paper's 1.3 by the 0.1 ml peak "
+               f"(band +-{BAND:.0%}); the swelling volume matches; {SENSITIVITY}")
 
 
 def m_context(text: str) -> Callable[[Run], Row]:
@@ -309,7 +294,8 @@ def m_clinical_volumes(run: Run) -> Row:
     if not run.brain:
         return Row("no result", "not measured", "3D scenarios missing")
     return Row(f"our swelling volumes {_swelling_text(run)}: below 50-150 ml, at the low end of "
-               "27-127 ml", "holds")
+               "27-127 ml", "by construction", "the swelling volumes follow from the white "
+               "matter's volume, to which the template is scaled (5-swelling-volumes)")
 
 
 def m_drops(run: Run) -> Row:
@@ -344,8 +330,9 @@ def m_swelling_volumes(run: Run) -> Row:
         return Row("no result", "not measured", "3D scenarios missing")
     ok = (abs(np.mean(both) / 56 - 1) < 0.05 and abs(np.mean(one) / 28 - 1) < 0.05)
     return Row(f"both hemispheres {min(both):.1f}-{max(both):.1f} ml, one {min(one):.1f}-"
-               f"{max(one):.1f} ml", "holds" if ok else "differs",
-               "" if ok else "the template's white matter is not half of its brain")
+               f"{max(one):.1f} ml", "by construction" if ok else "differs",
+               "the template is scaled so that its white matter is half of 1,108 ml" if ok
+               else "the template's white matter is not half of its brain")
 
 
 def m_damage(run: Run) -> Row:
