@@ -445,6 +445,8 @@ def edge_exponents(vf, beta: float, fit: tuple[float, float] = EDGE_FIT_RANGE
     mid, rms = [], []
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         ring = (r >= a) & (r < b)
+        if not ring.any():  # a coarse mesh: no vertex in this ring
+            continue
         mid.append(math.sqrt(a * b))
         rms.append(math.sqrt(np.sum(weight[ring] * tau[ring] ** 2) / np.sum(weight[ring])))
     s_tau = float(np.polyfit(np.log(mid), np.log(rms), 1)[0])
