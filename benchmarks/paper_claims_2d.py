@@ -405,6 +405,32 @@ def m_insensitive(run: Run) -> Row:
 
 
 
+def m_shear_edge(run: Run, text_3d: str = "") -> Row:
+    """"Large shear stresses around the opening edge": the headline cases' maximum shear
+    stress (outside the edge disks) lies within ``EDGE_NEIGHBOURHOOD`` of an opening corner;
+    ``text_3d``: the brain's part, shown beside it."""
+    from brainbulge.studies.trends import EDGE_NEIGHBOURHOOD
+
+    rows = [run.sector.get(n) for n in ("noslip_a80_b60", "sliding_a80_b60")]
+    if not all(r and r.get("argmax_shear_stress") is not None for r in rows):
+        return Row(text_3d or "no result", "not measured",
+                   "the run has no shear-stress output (it predates it)")
+    parts, ok = [], True
+    for r in rows:
+        loc = r["argmax_shear_stress"]
+        beta = math.radians(float(r["beta"]) / 2)
+        d = min(math.dist(loc[:2], (sx * math.sin(beta), math.cos(beta))) for sx in (-1, 1))
+        ok &= d <= EDGE_NEIGHBOURHOOD
+        raw = float(r["raw_max_shear_stress"])
+        parts.append(f"{r['contact']}: max {float(r['max_shear_stress']):.3g} kPa at "
+                     f"{d:.3f} R from the opening's corner, on the edge disk's circle (the "
+                     f"stress is singular there, 5-analytical-punch; over all points "
+                     f"{raw:.3g} kPa)")
+    ours = "2D headline: " + "; ".join(parts) + (f"; {text_3d}" if text_3d else "")
+    return Row(ours, "holds" if ok else "differs", "" if ok else
+               f"a maximum lies farther than {EDGE_NEIGHBOURHOOD:g} R from the corners")
+
+
 # --- the analytical comparison: the inverted punch's singularity at the opening's edge -----
 #: the band of distances from the opening's corner [R] over which the exponents are fitted:
 #: beyond a few corner elements, within the corner's neighbourhood

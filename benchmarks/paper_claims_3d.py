@@ -55,7 +55,9 @@ def m_brain_volume(run: Run) -> Row:
 def m_surface(run: Run) -> Row:
     return Row("ICBM152 template (an average of many heads, 1 mm): its smooth intracranial "
                "envelope has no cortical folds to measure", "other setup",
-               "another subject: the paper's MRI is not public")
+               "another subject: the paper's MRI is not public. The paper's 0.252 mm cannot be "
+               "a cortical thickness (the cortex is 1-4.5 mm thick, far more than one of its "
+               "0.9 mm voxels): most likely 0.252 cm, 2.5 mm")
 
 
 def m_mri(run: Run) -> Row:
@@ -282,6 +284,82 @@ def m_tangential_28(run: Run) -> Row:
                "holds" if where == "within" else "differs",
                "" if where == "within" else f"{where} the paper's 1.3 by the 0.1 ml peak "
                f"(band +-{BAND:.0%}); the swelling volume matches; {SENSITIVITY}")
+
+
+def _peak_places(run: Run, key: str, place: Callable[[dict], bool]) -> dict[str, bool]:
+    """Scenario -> whether the 0.1 ml peak set of ``key`` lies where ``place`` accepts."""
+    out = {}
+    for n, s in run.brain.items():
+        ps = s.get("extreme_sites", {}).get(key, {}).get("peak_set")
+        if ps:
+            out[n] = place({"rim_distance_mm": ps["median_rim_distance_mm"],
+                            "under_flap": ps["share_under_flap"] > 0.5,
+                            "depth_mm": ps["median_depth_mm"]})
+    return out
+
+
+#: the paper's places of the three zones: (summary key, place, its words)
+ZONES = (("max_radial_stretch", lambda s: s["under_flap"] and s["rim_distance_mm"] > 15,
+          "radial maximum deep in the bulge"),
+         ("min_radial_stretch", lambda s: s["rim_distance_mm"] < 25,
+          "radial minimum around the opening"),
+         ("max_tangential_stretch", lambda s: s["rim_distance_mm"] < 25,
+          "tangential maximum in a ring round the opening"))
+
+
+def m_locations_shared(run: Run) -> Row:
+    """The abstract's "locations of maximum stretch universally shared": in every scenario
+    each zone's 0.1 ml peak set lies where the paper puts it (:data:`ZONES`)."""
+    if not run.brain:
+        return Row("no result", "not measured", "3D scenarios missing")
+    parts, missing = [], []
+    for key, place, words in ZONES:
+        at = _peak_places(run, key, place)
+        parts.append(f"{words}: {sum(at.values())} of {len(at)} scenarios")
+        missing += [f"{words} ({n})" for n, ok in sorted(at.items()) if not ok]
+    return Row("0.1 ml peak sets: " + "; ".join(parts), "differs" if missing else "holds",
+               "not where the paper puts it: " + ", ".join(missing) if missing else "")
+
+
+def m_strain_in_excess(run: Run) -> Row:
+    """The abstract's "strains in excess of 30 %" for 28-56 ml: the 0.1 ml peak of the
+    maximum principal strain at least 0.30 in some scenario (single points and elements
+    beside it)."""
+    if not run.brain:
+        return Row("no result", "not measured", "3D scenarios missing")
+    n = max(run.brain, key=lambda k: float(run.brain[k]["peak_principal_strain"]))
+    s = run.brain[n]
+    peak = float(s["peak_principal_strain"])
+    ours = (f"peak (0.1 ml) {peak:.3f} ({n}), point {float(s['max_principal_strain']):.3f}, "
+            f"element {float(s.get('element_max_principal_strain', float('nan'))):.3f}; "
+            f"swelling {_swelling_text(run)}")
+    if peak >= 0.30:
+        return Row(ours, "holds")
+    return Row(ours, "differs", f"no 0.1 ml of tissue exceeds 30 % (the peak is "
+               f"{excess_text(peak, 0.30, False)}); only single points and elements do, and "
+               "they grow under refinement (interface singularities)")
+
+
+def m_release(run: Run) -> Row:
+    return Row("not modelled: every scenario swells with the flap already open (Js 1 -> 1.1 "
+               "against the skull with the opening); no state swollen under the intact skull "
+               "is released", "not modelled",
+               "with the flap closed the swelling is infeasible (an incompressible tissue in a "
+               "rigid closed skull: `--flap none` exits with that message), so there is no "
+               "swollen, strained state to release without a compressible or perfused tissue, "
+               "which the paper does not model either")
+
+
+def m_shear_edge_3d(run: Run) -> str:
+    """Where the 3D maximum shear stress's 0.1 ml peak sets lie, as text ("" without them)."""
+    at = _peak_places(run, "max_shear_stress", lambda s: s["rim_distance_mm"] < 25)
+    if not at:
+        return ""
+    peaks = [float(s["peak_shear_stress"]) for s in run.brain.values()
+             if s.get("peak_shear_stress") is not None]
+    return (f"3D: 0.1 ml peak of the maximum shear stress {min(peaks):.3g}-{max(peaks):.3g} kPa"
+            f", its peak set within 25 mm of the rim in {sum(at.values())} of {len(at)} "
+            "scenarios")
 
 
 def m_context(text: str) -> Callable[[Run], Row]:

@@ -15,8 +15,8 @@ MARKED = 0.05
 #: 0.7 admits 0.625-0.775, 30 % admits 22.5-37.5 %
 BAND = 0.25
 #: the verdicts, in the order the page states them
-VERDICTS = ("holds", "differs", "singular", "by construction", "not measured", "same setup",
-            "other setup", "context")
+VERDICTS = ("holds", "differs", "singular", "by construction", "not measured", "not modelled",
+            "same setup", "other setup", "context")
 #: 2D sliding scenarios that wait for the sliding solver that releases points past the edge
 WAITING = {"sliding_a80_b30"}
 
