@@ -252,9 +252,32 @@ def m_strain_max(run: Run) -> Row:
 
 
 def m_displacement_centre(run: Run) -> Row:
-    return Row("the summaries give the largest displacement's value, not its place; the "
-               "section figures show it", "not measured",
-               "no summary key locates the largest displacement")
+    """The largest displacement's place (``argmax_displacement``): under the flap and more
+    than 15 mm from its rim (the bulge's centre) in every scenario."""
+    have = {n: s for n, s in run.brain.items() if s.get("argmax_displacement")}
+    path = run.root / "craniectomy" / "mesh" / "brain.npz"
+    if not have or not path.is_file():
+        return Row("the summaries of this run give the largest displacement's value, not its "
+                   "place", "not measured", "the run predates `argmax_displacement`")
+    from brainbulge.geometry.brain import load_brain_mesh
+    from brainbulge.geometry.brain.skull import RigidSkull
+
+    bm = load_brain_mesh(path)
+    parts, ok = [], True
+    for n, s in sorted(have.items()):
+        flap = bm.flaps[n.split("-flap_")[0]]
+        X = np.asarray([s["argmax_displacement"]], dtype=float)
+        cut = flap.cutter_distance(X)[0]
+        rim = float(np.hypot(cut, RigidSkull(bm.envelope).envelope_distance(
+            X, gradient=False)[0])[0])
+        centre = bool(cut[0] < 0) and rim > 15
+        ok &= centre
+        parts.append(f"{n}: {float(s['max_displacement']):.2f} mm, "
+                     f"{'under' if cut[0] < 0 else 'not under'} the flap, {rim:.0f} mm from "
+                     "the rim")
+    return Row("largest |u| at " + "; ".join(parts), "holds" if ok else "differs",
+               "" if ok else "in some scenario the largest displacement is not under the "
+               "flap, > 15 mm from its rim")
 
 
 def m_three_zones(run: Run) -> Row:
