@@ -186,7 +186,10 @@ def variant_row(v: Variant, out: Path, cache: Path) -> str:
     wall = out / f"{v.name}.wall"
     wall_s = float(wall.read_text()) if wall.is_file() else math.nan
     time_report = out / f"{v.name}.time"
-    peak = h3.peak_mb(time_report.read_text()) if time_report.is_file() else None
+    report = time_report.read_text() if time_report.is_file() else ""
+    peak = h3.peak_mb(report)
+    if math.isnan(wall_s):
+        wall_s = elapsed_s(report)
     head = f"| {v.factor} | {v.value} |"
     if not summary.is_file():
         log = folder / "brainbulge.log"
@@ -203,6 +206,15 @@ def variant_row(v: Variant, out: Path, cache: Path) -> str:
     cells += [f"{s[k]:.3f}" for k in SUMMARY_COLUMNS.values()]
     return (head + f" {conv} | {s.get('elements', 0):,} | " + " | ".join(cells)
             + f" | {wall_s:.0f} | {h3._num(peak, ',.0f')} |")
+
+
+def elapsed_s(time_report: str) -> float:
+    """The wall time [s] from ``/usr/bin/time -v``'s report (NaN without one)."""
+    for line in time_report.splitlines():
+        if "Elapsed (wall clock)" in line:
+            parts = [float(p) for p in line.rsplit(": ", 1)[1].split(":")]
+            return sum(p * 60 ** k for k, p in enumerate(reversed(parts)))
+    return math.nan
 
 
 def print_table(variants: list[Variant], out: Path, cache: Path) -> None:
