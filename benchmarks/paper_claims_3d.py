@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from paper_run import MARKED, UP_TO_TOLERANCE, Row, Run, up_to
+from paper_run import BAND, MARKED, Row, Run, band, excess_text
 
 # --- 3D measures ------------------------------------------------------------------------
 SCENARIO_ORDER = [f"{flap}-flap_{side}-swelling" for flap in ("left", "frontal")
@@ -55,7 +55,9 @@ def m_brain_volume(run: Run) -> Row:
 def m_surface(run: Run) -> Row:
     return Row("ICBM152 template (an average of many heads, 1 mm): its smooth intracranial "
                "envelope has no cortical folds to measure", "other setup",
-               "another subject: the paper's MRI is not public")
+               "another subject: the paper's MRI is not public. The paper's 0.252 mm cannot be "
+               "a cortical thickness (the cortex is 1-4.5 mm thick, far more than one of its "
+               "0.9 mm voxels): most likely 0.252 cm, 2.5 mm")
 
 
 def m_mri(run: Run) -> Row:
@@ -103,9 +105,9 @@ def m_flaps(run: Run) -> Row:
         return Row("no mesh", "not measured", "3D part missing")
     a = v["flaps_cm2"]
     return Row(f"nominal areas: frontal {a['frontal']:.0f} cm2, left {a['left']:.0f} cm2, ratio "
-               f"{a['frontal'] / a['left']:.2f}", "holds"
-               if abs(a["frontal"] / a["left"] - 2) < 0.2 else "differs",
-               "the paper counts removed skull elements; we cut the skull with a cylinder")
+               f"{a['frontal'] / a['left']:.2f}", "by construction",
+               "the flaps' diameters are inputs chosen for the paper's \"twice\"; the paper "
+               "counts removed skull elements, whose ratio 4,279 / 2,494 is 1.72")
 
 
 def _pairs(run: Run, key: str) -> list[tuple[str, float, float]]:
@@ -156,10 +158,14 @@ def _site_text(site: dict) -> str:
 
 def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
                    place: Callable[[dict], bool], place_text: str) -> Row:
-    """Our extremes against the paper's "up to ``paper``" at the place ``place`` accepts
-    (a site, or a peak set given as its median rim distance and share under the flap).
-    Holds when a value that reaches the paper's (:func:`up_to`) sits in that place and is
-    not one element's recurring value, and the 0.1 ml peak set is in that place too."""
+    """Our extremes against the paper's "up to" / "down to" ``paper`` at the place ``place``
+    accepts (a site, or a peak set given as its median rim distance and share under the flap).
+    The primary measure is what the paper's contour plots show at the end of their colour
+    bar and what is stable under refinement: the 0.1 ml peak (``peak_*``; ``p01_*`` for a
+    minimum), the most extreme over the scenarios. It holds when that is within
+    :data:`~paper_run.BAND` of the paper's value (:func:`~paper_run.band`) and its 0.1 ml
+    peak set lies in that place in most scenarios; the single-point and element values are
+    shown beside it (they change by up to 45 % between meshes: not verdicts)."""
     if not run.brain:
         return Row("no result", "not measured", "3D scenarios missing")
     is_max = key.startswith("max_")
@@ -168,24 +174,27 @@ def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
     vals = {n: s for n, s in run.brain.items() if s.get(key) is not None}
     if not vals:
         return Row("no result", "not measured", "3D summaries without this key")
-
-    def reaches(v: float) -> bool:
-        return up_to(v, paper) if stretch else v >= UP_TO_TOLERANCE * paper
-
+    n_vol = pick(vals, key=lambda n: float(vals[n][vol_key]))
+    vol = float(vals[n_vol][vol_key])
     n_pt = pick(vals, key=lambda n: float(vals[n][key]))
     n_el = pick(vals, key=lambda n: float(vals[n].get(f"element_{key}", vals[n][key])))
     pt, el = vals[n_pt], vals[n_el]
     pt_site = pt.get("extreme_sites", {}).get(key)
     el_site = el.get("element_sites", {}).get(key)
     rec_pt, rec_el = _recurring(run, "extreme_sites", key), _recurring(run, "element_sites", key)
-    vol = pick(float(v[vol_key]) for v in vals.values())
-    ours = [f"point {float(pt[key]):.3f} ({n_pt})"]
-    if pt_site:
-        ours[-1] += f" at {_site_text(pt_site)}"
-    if el_site:
-        ours.append(f"element {float(el[f'element_{key}']):.3f} ({n_el}) at "
-                    f"{_site_text(el_site)}")
-    ours.append(f"{'peak (0.1 ml)' if is_max else 'p01'} {vol:.3f}")
+    ours = [f"{'peak (0.1 ml)' if is_max else 'p01'} {vol:.3f} ({n_vol}; "
+            f"{excess_text(vol, paper, stretch)})"]
+    for label, value, site, rec in (
+            ("point", float(pt[key]), pt_site, rec_pt),
+            ("element", float(el.get(f"element_{key}", el[key])), el_site, rec_el)):
+        text = f"{label} {value:.3f} ({n_pt if label == 'point' else n_el})"
+        if site:
+            text += f" at {_site_text(site)}"
+            n_rec = rec.get(str(site["X_mm"]), 1)
+            if n_rec > 1:
+                text += (f", the extreme of one element in {n_rec} of {len(run.brain)} "
+                         "scenarios whatever the flap (an interface singularity)")
+        ours.append(text)
     peak_places = []
     for s in vals.values():
         ps = s.get("extreme_sites", {}).get(key, {}).get("peak_set")
@@ -195,33 +204,27 @@ def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
                                       "depth_mm": ps["median_depth_mm"]}))
     ours.append(f"0.1 ml peak sets {place_text} in {sum(peak_places)} of {len(peak_places)} "
                 "scenarios")
-    good = []
-    notes = []
-    for label, value, site, rec in (
-            ("point", float(pt[key]), pt_site, rec_pt),
-            ("element", float(el.get(f"element_{key}", el[key])), el_site, rec_el)):
-        if site is None:
-            continue
-        n_rec = rec.get(str(site["X_mm"]), 1)
-        good.append((reaches(value), place(site), n_rec > 1))
-        if reaches(value) and n_rec > 1:
-            notes.append(f"the {label} value {value:.3f} belongs to one element that is the "
-                         f"extreme in {n_rec} of {len(run.brain)} scenarios, whatever the flap "
-                         "(an interface singularity of that element, not the bulge's response)")
-        elif reaches(value) and not place(site):
-            notes.append(f"the {label} value {value:.3f} is not {place_text}")
     reasons = []
-    if not any(r for r, _, _ in good):
-        reasons.append(f"below the paper's {paper:g} even in element values: {_swelling_text(run)} "
-                       "of swelling on a mesh far coarser than the paper's (mesh size), and "
-                       "the recovered gradient smooths element values")
-    elif not any(r and p and not rep for r, p, rep in good):
-        reasons.extend(notes)
-    if peak_places and sum(peak_places) < len(peak_places):
+    where = band(vol, paper, stretch)
+    if where != "within":
+        reasons.append(f"{where} the paper's {paper:g}: the 0.1 ml {'peak' if is_max else 'p01'}"
+                       f" reaches {excess_text(vol, paper, stretch)} (band +-{BAND:.0%}); "
+                       f"{SENSITIVITY}")
+    if peak_places and 2 * sum(peak_places) <= len(peak_places):
         reasons.append(f"the 0.1 ml peak set is not {place_text} in "
-                       f"{len(peak_places) - sum(peak_places)} scenarios")
-    holds = not reasons
-    return Row("; ".join(ours), "holds" if holds else "differs", "; ".join(reasons))
+                       f"{len(peak_places) - sum(peak_places)} of {len(peak_places)} scenarios")
+    return Row("; ".join(ours), "differs" if reasons else "holds", "; ".join(reasons))
+
+
+#: what the 3D sensitivity study (benchmarks/bench_sensitivity_3d.py) found for the
+#: magnitudes, quoted in every 3D magnitude row that differs
+SENSITIVITY = ("cause not found: on the 111k template one change at a time (edge radius "
+               "8 / 4 / 2 mm, superior band 0 / 1 / 2 cm, base 10 mm lower / higher, CSF x10; "
+               "x0.1 did "
+               "not converge) moves these 0.1 ml peaks by 0.024 at most, the sharper edge away "
+               "from the paper; sampling the vertices instead (nodal values, as a contour plot "
+               "shows) lifts the tangential peak 5-25 mm from the rim to 1.23-1.29, not the "
+               "radial ones (docs/performance.md, bench_sensitivity_3d.py)")
 
 
 def _swelling_text(run: Run) -> str:
@@ -254,9 +257,32 @@ def m_strain_max(run: Run) -> Row:
 
 
 def m_displacement_centre(run: Run) -> Row:
-    return Row("the summaries give the largest displacement's value, not its place; the "
-               "section figures show it", "not measured",
-               "no summary key locates the largest displacement")
+    """The largest displacement's place (``argmax_displacement``): under the flap and more
+    than 15 mm from its rim (the bulge's centre) in every scenario."""
+    have = {n: s for n, s in run.brain.items() if s.get("argmax_displacement")}
+    path = run.root / "craniectomy" / "mesh" / "brain.npz"
+    if not have or not path.is_file():
+        return Row("the summaries of this run give the largest displacement's value, not its "
+                   "place", "not measured", "the run predates `argmax_displacement`")
+    from brainbulge.geometry.brain import load_brain_mesh
+    from brainbulge.geometry.brain.skull import RigidSkull
+
+    bm = load_brain_mesh(path)
+    parts, ok = [], True
+    for n, s in sorted(have.items()):
+        flap = bm.flaps[n.split("-flap_")[0]]
+        X = np.asarray([s["argmax_displacement"]], dtype=float)
+        cut = flap.cutter_distance(X)[0]
+        rim = float(np.hypot(cut, RigidSkull(bm.envelope).envelope_distance(
+            X, gradient=False)[0])[0])
+        centre = bool(cut[0] < 0) and rim > 15
+        ok &= centre
+        parts.append(f"{n}: {float(s['max_displacement']):.2f} mm, "
+                     f"{'under' if cut[0] < 0 else 'not under'} the flap, {rim:.0f} mm from "
+                     "the rim")
+    return Row("largest |u| at " + "; ".join(parts), "holds" if ok else "differs",
+               "" if ok else "in some scenario the largest displacement is not under the "
+               "flap, > 15 mm from its rim")
 
 
 def m_three_zones(run: Run) -> Row:
@@ -273,30 +299,95 @@ def m_tangential_28(run: Run) -> Row:
     one = {n: s for n, s in run.brain.items() if "both" not in n}
     if not one:
         return Row("no result", "not measured", "3D scenarios missing")
-    rec = _recurring(run, "element_sites", "max_tangential_stretch")
-
-    def fair(s: dict) -> float:
-        """The larger of the point and the element value, the latter unless its element is
-        the extreme in several scenarios."""
-        el = s.get("element_sites", {}).get("max_tangential_stretch")
-        v = float(s["max_tangential_stretch"])
-        if el and rec.get(str(el["X_mm"]), 1) == 1:
-            v = max(v, float(s["element_max_tangential_stretch"]))
-        return v
-
-    n = max(one, key=lambda k: fair(one[k]))
+    n = max(one, key=lambda k: float(one[k]["peak_tangential_stretch"]))
     s = one[n]
     white = float(s.get("white_matter_volume_ml", 0)) * 2
     sw = float(s["swelling_volume_ml"])
+    peak = float(s["peak_tangential_stretch"])
     elem = float(s.get("element_max_tangential_stretch", s["max_tangential_stretch"]))
-    ok = up_to(fair(s), 1.3)
+    where = band(peak, 1.3)
     return Row(f"one hemisphere swelling {sw:.1f} ml ({100 * sw / white:.1f} % of all white "
-               f"matter): max lambda_t {float(s['max_tangential_stretch']):.3f}, element "
-               f"values {elem:.3f}, peak {float(s['peak_tangential_stretch']):.3f} ({n})",
-               "holds" if ok else "differs",
-               "" if ok else "the swelling volume matches; the stretch stays below 1.3 but "
-               "for elements that are the extreme in several scenarios (see the tangential "
-               "row above)")
+               f"matter): peak (0.1 ml) lambda_t {peak:.3f} ({excess_text(peak, 1.3)}), "
+               f"point {float(s['max_tangential_stretch']):.3f}, element {elem:.3f} ({n})",
+               "holds" if where == "within" else "differs",
+               "" if where == "within" else f"{where} the paper's 1.3 by the 0.1 ml peak "
+               f"(band +-{BAND:.0%}); the swelling volume matches; {SENSITIVITY}")
+
+
+def _peak_places(run: Run, key: str, place: Callable[[dict], bool]) -> dict[str, bool]:
+    """Scenario -> whether the 0.1 ml peak set of ``key`` lies where ``place`` accepts."""
+    out = {}
+    for n, s in run.brain.items():
+        ps = s.get("extreme_sites", {}).get(key, {}).get("peak_set")
+        if ps:
+            out[n] = place({"rim_distance_mm": ps["median_rim_distance_mm"],
+                            "under_flap": ps["share_under_flap"] > 0.5,
+                            "depth_mm": ps["median_depth_mm"]})
+    return out
+
+
+#: the paper's places of the three zones: (summary key, place, its words)
+ZONES = (("max_radial_stretch", lambda s: s["under_flap"] and s["rim_distance_mm"] > 15,
+          "radial maximum deep in the bulge"),
+         ("min_radial_stretch", lambda s: s["rim_distance_mm"] < 25,
+          "radial minimum around the opening"),
+         ("max_tangential_stretch", lambda s: s["rim_distance_mm"] < 25,
+          "tangential maximum in a ring round the opening"))
+
+
+def m_locations_shared(run: Run) -> Row:
+    """The abstract's "locations of maximum stretch universally shared": in every scenario
+    each zone's 0.1 ml peak set lies where the paper puts it (:data:`ZONES`)."""
+    if not run.brain:
+        return Row("no result", "not measured", "3D scenarios missing")
+    parts, missing = [], []
+    for key, place, words in ZONES:
+        at = _peak_places(run, key, place)
+        parts.append(f"{words}: {sum(at.values())} of {len(at)} scenarios")
+        missing += [f"{words} ({n})" for n, ok in sorted(at.items()) if not ok]
+    return Row("0.1 ml peak sets: " + "; ".join(parts), "differs" if missing else "holds",
+               "not where the paper puts it: " + ", ".join(missing) if missing else "")
+
+
+def m_strain_in_excess(run: Run) -> Row:
+    """The abstract's "strains in excess of 30 %" for 28-56 ml: the 0.1 ml peak of the
+    maximum principal strain at least 0.30 in some scenario (single points and elements
+    beside it)."""
+    if not run.brain:
+        return Row("no result", "not measured", "3D scenarios missing")
+    n = max(run.brain, key=lambda k: float(run.brain[k]["peak_principal_strain"]))
+    s = run.brain[n]
+    peak = float(s["peak_principal_strain"])
+    ours = (f"peak (0.1 ml) {peak:.3f} ({n}), point {float(s['max_principal_strain']):.3f}, "
+            f"element {float(s.get('element_max_principal_strain', float('nan'))):.3f}; "
+            f"swelling {_swelling_text(run)}")
+    if peak >= 0.30:
+        return Row(ours, "holds")
+    return Row(ours, "differs", f"no 0.1 ml of tissue exceeds 30 % (the peak is "
+               f"{excess_text(peak, 0.30, False)}); only single points and elements do, and "
+               "they grow under refinement (interface singularities)")
+
+
+def m_release(run: Run) -> Row:
+    return Row("not modelled: every scenario swells with the flap already open (Js 1 -> 1.1 "
+               "against the skull with the opening); no state swollen under the intact skull "
+               "is released", "not modelled",
+               "with the flap closed the swelling is infeasible (an incompressible tissue in a "
+               "rigid closed skull: `--flap none` exits with that message), so there is no "
+               "swollen, strained state to release without a compressible or perfused tissue, "
+               "which the paper does not model either")
+
+
+def m_shear_edge_3d(run: Run) -> str:
+    """Where the 3D maximum shear stress's 0.1 ml peak sets lie, as text ("" without them)."""
+    at = _peak_places(run, "max_shear_stress", lambda s: s["rim_distance_mm"] < 25)
+    if not at:
+        return ""
+    peaks = [float(s["peak_shear_stress"]) for s in run.brain.values()
+             if s.get("peak_shear_stress") is not None]
+    return (f"3D: 0.1 ml peak of the maximum shear stress {min(peaks):.3g}-{max(peaks):.3g} kPa"
+            f", its peak set within 25 mm of the rim in {sum(at.values())} of {len(at)} "
+            "scenarios")
 
 
 def m_context(text: str) -> Callable[[Run], Row]:
@@ -309,7 +400,8 @@ def m_clinical_volumes(run: Run) -> Row:
     if not run.brain:
         return Row("no result", "not measured", "3D scenarios missing")
     return Row(f"our swelling volumes {_swelling_text(run)}: below 50-150 ml, at the low end of "
-               "27-127 ml", "holds")
+               "27-127 ml", "by construction", "the swelling volumes follow from the white "
+               "matter's volume, to which the template is scaled (5-swelling-volumes)")
 
 
 def m_drops(run: Run) -> Row:
@@ -344,8 +436,9 @@ def m_swelling_volumes(run: Run) -> Row:
         return Row("no result", "not measured", "3D scenarios missing")
     ok = (abs(np.mean(both) / 56 - 1) < 0.05 and abs(np.mean(one) / 28 - 1) < 0.05)
     return Row(f"both hemispheres {min(both):.1f}-{max(both):.1f} ml, one {min(one):.1f}-"
-               f"{max(one):.1f} ml", "holds" if ok else "differs",
-               "" if ok else "the template's white matter is not half of its brain")
+               f"{max(one):.1f} ml", "by construction" if ok else "differs",
+               "the template is scaled so that its white matter is half of 1,108 ml" if ok
+               else "the template's white matter is not half of its brain")
 
 
 def m_damage(run: Run) -> Row:

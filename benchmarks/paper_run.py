@@ -10,9 +10,13 @@ from typing import Any
 
 #: "markedly" (the paper's qualifier) and "significantly": by at least this fraction
 MARKED = 0.05
-#: the paper's "up to" values are met when ours reach this fraction of them (their
-#: deviation from 1 for stretches, the value for strains)
-UP_TO_TOLERANCE = 0.8
+#: an "up to" / "down to" value is met when ours is within this fraction of it, both ways
+#: (of its excess over 1 for stretches, of the value for strains): 1.3 admits 1.225-1.375,
+#: 0.7 admits 0.625-0.775, 30 % admits 22.5-37.5 %
+BAND = 0.25
+#: the verdicts, in the order the page states them
+VERDICTS = ("holds", "differs", "singular", "by construction", "not measured", "not modelled",
+            "same setup", "other setup", "context")
 #: 2D sliding scenarios that wait for the sliding solver that releases points past the edge
 WAITING = {"sliding_a80_b30"}
 
@@ -22,7 +26,7 @@ class Row:
     """One line of the claims table."""
 
     ours: str
-    verdict: str  # holds | differs | not measured | same setup | other setup | context
+    verdict: str  # one of VERDICTS
     why: str = ""
 
 
@@ -72,8 +76,16 @@ def load_run(root: Path) -> Run:
 
 
 
-def up_to(value: float, paper: float, stretch: bool = True) -> bool:
-    """Whether ``value`` meets the paper's "up to ``paper``" (:data:`UP_TO_TOLERANCE`)."""
-    if stretch:
-        return abs(value - 1) >= UP_TO_TOLERANCE * abs(paper - 1)
-    return value >= UP_TO_TOLERANCE * paper
+def band(value: float, paper: float, stretch: bool = True) -> str:
+    """Where ``value`` lies against the paper's "up to" / "down to" ``paper``: ``within``
+    :data:`BAND` of it (of the excess over 1 for a stretch), ``below`` or ``above`` (in the
+    sense of the excess: a stretch 0.8 is "below" the paper's 0.7, it falls less far)."""
+    ours, theirs = (value - 1, paper - 1) if stretch else (value, paper)
+    ratio = ours / theirs
+    return "within" if abs(ratio - 1) <= BAND else ("below" if ratio < 1 else "above")
+
+
+def excess_text(value: float, paper: float, stretch: bool = True) -> str:
+    """``value`` as a percentage of the paper's excess over 1 (of the value for a strain)."""
+    ours, theirs = (value - 1, paper - 1) if stretch else (value, paper)
+    return f"{100 * ours / theirs:.0f} % of the paper's {'excess' if stretch else 'value'}"

@@ -248,7 +248,7 @@ def test_the_solved_toy_brain_reports_where_its_extremes_are(toy_run) -> None:
     s, _ = toy_run
     sites = s["extreme_sites"]
     assert set(sites) == {"max_principal_strain", "max_radial_stretch", "min_radial_stretch",
-                          "max_tangential_stretch"}
+                          "max_tangential_stretch", "max_shear_stress"}
     for key, site in sites.items():
         assert site["value"] == pytest.approx(s[key], rel=1e-12)
         assert site["rim_distance_mm"] >= s["edge_exclusion_mm"] - 1e-6
@@ -260,4 +260,6 @@ def test_the_solved_toy_brain_reports_where_its_extremes_are(toy_run) -> None:
         assert 0.0 <= site["peak_set"]["share_under_flap"] <= 1.0
     assert s["element_max_principal_strain"] >= s["p99_principal_strain"]
     assert s["element_min_radial_stretch"] <= s["p01_radial_stretch"]
-    assert set(s["element_sites"]) == set(sites)
+    assert set(s["element_sites"]) == set(sites) - {"max_shear_stress"}  # kinematic only
+    # the maximum shear stress [kPa]: positive, its 0.1 ml peak below its maximum
+    assert 0 < s["peak_shear_stress"] <= s["max_shear_stress"] <= s["raw_max_shear_stress"]

@@ -287,3 +287,26 @@ def test_mini_outputs_are_those_of_its_p1_part() -> None:
 
     J = det3(s.F).reshape(n_el, nq)[inner, 0]
     np.testing.assert_allclose(J, area(x[els[inner]]) / area(X[els[inner]]), rtol=1e-9)
+
+
+def test_max_shear_stress_of_simple_shear_is_the_closed_form() -> None:
+    """Simple shear ``F = I + gamma e1 e2`` of incompressible Mooney-Rivlin: ``sigma =
+    c1 b - c2 b^-1 - p I`` gives ``sigma_12 = mu gamma``, ``sigma_11 - sigma_22 = mu
+    gamma^2``, so the in-plane maximum shear stress is ``mu gamma sqrt(1 + gamma^2 / 4)``
+    (``sigma_33`` lies between the in-plane principal stresses). The Ogden form of the same
+    solid (no closed-form stress: central differences of its energy) gives the same."""
+    from brainbulge.materials.mooney_rivlin import MooneyRivlin
+    from brainbulge.materials.ogden import Ogden
+    from brainbulge.results.measures.fields import max_shear_stress
+
+    c1, c2 = 0.28, 333.0
+    gamma = np.array([0.0, 0.1, 0.3])
+    F = np.tile(np.eye(3), (3, 1, 1))
+    F[:, 0, 1] = gamma
+    expected = (c1 + c2) * gamma * np.sqrt(1 + gamma**2 / 4)
+    assert max_shear_stress(F, MooneyRivlin(c1, c2)) == pytest.approx(expected, abs=1e-9)
+    ogden = Ogden(c=(c1, -c2), alpha=(2.0, -2.0), eps=1e-12)
+    assert max_shear_stress(F, ogden) == pytest.approx(expected, rel=1e-5, abs=1e-6)
+    # a dilatation (the swelling's Js) adds no shear
+    assert max_shear_stress(1.1 ** (1 / 3) * F[:1], MooneyRivlin(c1, c2))[0] == pytest.approx(
+        0.0, abs=1e-9)

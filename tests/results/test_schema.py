@@ -24,9 +24,10 @@ def test_each_key_is_declared_once_with_unit_and_meaning() -> None:
     for k in schema.KEYS:
         assert k.meaning and k.cases <= schema.BOTH and len(k.labels) <= len(k.names)
         assert not k.instead or len(k.instead) == len(k.names)
-    # the families of the stretches and the strain: 5 extremes, 5 raw, 3 argmax,
-    # 2 percentiles per extreme, 3 peaks
-    assert len(schema.percentiles()) == 10 and len(schema.raws(schema.CSF)) == 5
+    # the families of the stretches, the strain and the shear stress: 6 extremes, 6 raw,
+    # 4 argmax, 2 percentiles per extreme, 4 peaks
+    assert len(schema.percentiles()) == 12 and len(schema.raws(schema.CSF)) == 6
+    assert len(schema.argmaxes()) == len(schema.peaks()) == 4
     # a deprecated key names a declared key to use instead
     for old, new in {**schema.deprecated_aliases(), **schema.deprecated_derived()}.items():
         assert new in schema.BY_NAME and old in schema.BY_NAME
@@ -75,7 +76,9 @@ def test_the_printout_gives_declared_keys_with_their_units(hemidisk_run) -> None
     line = printed.strip().splitlines()[-1]
     got = {k.strip(): v for k, v in re.findall(r"([^,=]+) = ([^ ,]+)", line)}
     assert list(got) == ["max |u|", "max lambda_n", "min lambda_n", "max lambda_t",
-                         "min lambda_t", "penetration"]
+                         "min lambda_t", "penetration", "skull crossing"]
+    assert float(got["skull crossing"]) == pytest.approx(summary["max_skull_crossing"],
+                                                         rel=1e-2, abs=1e-12)
     assert float(got["max |u|"]) == pytest.approx(summary["max_displacement"], rel=1e-3)
     assert float(got["min lambda_n"]) == pytest.approx(summary["min_radial_stretch"],
                                                        abs=1e-4)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from brainbulge.studies.trends import MARKED, check_trends, trends_markdown
+from brainbulge.studies.trends import MARKED, TIE, check_trends, trends_markdown
 
 
 def _rows(radial_noslip_over_sliding: float, tangential_sliding_over_noslip: float):
@@ -73,3 +73,23 @@ def test_a_narrower_opening_with_less_deformation_differs_from_trend_i() -> None
     (i,) = [t for t in check_trends(rows) if t.label == "(i)" and t.maxima == "raw"]
     assert i.verdict == "differs" and i.held == i.cases - 1
     assert "max_displacement" in i.evidence
+
+
+def test_a_tie_within_the_tolerance_is_not_a_failure_and_beyond_it_is() -> None:
+    """A wider opening whose stretch maximum rises by half the tie tolerance still holds
+    trend (i); by twice the tolerance it differs. The same for the contacts' ratio in (v)."""
+    def wider_rises(rise: float) -> str:
+        rows = _rows(1 + 2 * MARKED, 1 + 2 * MARKED)
+        pick = {r["beta"]: r for r in rows if r["contact"] == "noslip" and r["alpha"] == 80.0}
+        pick[120.0]["max_tangential_stretch"] = pick[60.0]["max_tangential_stretch"] * (1 + rise)
+        return next(t.verdict for t in check_trends(rows)
+                    if t.label == "(i)" and t.maxima == "edge-excluded")
+
+    def sliding_lower(drop: float) -> str:
+        return next(t.verdict for t in check_trends(_rows(1 + 2 * MARKED, 1 - drop))
+                    if t.label == "(v)" and t.maxima == "edge-excluded")
+
+    assert wider_rises(TIE / 2) == "holds"
+    assert wider_rises(2 * TIE) == "differs"
+    assert sliding_lower(TIE / 2) == "holds, not markedly"
+    assert sliding_lower(2 * TIE) == "inverted"

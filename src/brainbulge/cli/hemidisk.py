@@ -44,5 +44,6 @@ def run_case(args: argparse.Namespace, case: Any) -> int:
     out = start_run(args, config)
     summary = run_hemidisk(case, out, progress=progress_bar())
     finish_run(out)
-    print(printout(summary, ("max_displacement", *extremes()[:4], "max_penetration"), HEMIDISK))
+    print(printout(summary, ("max_displacement", *extremes()[:4], "max_penetration",
+                             "max_skull_crossing"), HEMIDISK))
     return 0

@@ -47,3 +47,24 @@ def check_finite(label: str, *values: float) -> None:
     for v in values:
         if not isinstance(v, (int, float)) or not math.isfinite(v):
             raise InputError(f"{label}: parameter {v!r} is not a finite number; give real values")
+
+
+def kirchhoff_deviator(material: Material, F: np.ndarray, step: float = 1e-6) -> np.ndarray:
+    """The deviatoric Kirchhoff stress ``dev tau = dev(dpsibar/dF F^T)`` [kPa] of ``material``
+    at deformation gradients ``F`` (n, 3, 3): in closed form where the material has one
+    (``kirchhoff_stress(F, p)``), else by central differences of ``psi_iso_numpy`` (relative
+    step ``step``). The multiplier adds ``J p I``, which the deviator drops."""
+    F = np.asarray(F, dtype=float)
+    if hasattr(material, "kirchhoff_stress"):
+        tau = material.kirchhoff_stress(F, 0.0)
+    else:
+        P = np.empty_like(F)
+        for i in range(3):
+            for j in range(3):
+                dF = np.zeros((3, 3))
+                dF[i, j] = step
+                P[:, i, j] = (material.psi_iso_numpy(F + dF)
+                              - material.psi_iso_numpy(F - dF)) / (2 * step)
+        tau = P @ np.swapaxes(F, -1, -2)
+    trace = np.trace(tau, axis1=-2, axis2=-1) / 3.0
+    return tau - trace[..., None, None] * np.eye(3)

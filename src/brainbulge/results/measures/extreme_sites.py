@@ -43,7 +43,7 @@ from brainbulge.results.measures.fields import (
     stretch_along,
     tangential_stretch,
 )
-from brainbulge.results.measures.schema import EXTREMES, SITES
+from brainbulge.results.measures.schema import ELEMENT_SITES, EXTREMES, SITES
 
 #: (summary key, field, kind) of the extremes whose sites are reported
 SITE_KEYS = tuple((key, EXTREMES[key[4:]][0], key[:3]) for key in SITES)
@@ -221,6 +221,8 @@ def element_extremes(ctx: SiteContext, u: np.ndarray, centre: np.ndarray,
     out: dict[str, object] = {}
     sites: dict[str, dict] = {}
     for key, field, kind in SITE_KEYS:
+        if key not in ELEMENT_SITES:
+            continue
         v = vals[field][idx]
         t = int(idx[np.argmax(v) if kind == "max" else np.argmin(v)])
         out[f"element_{key}"] = float(vals[field][t])

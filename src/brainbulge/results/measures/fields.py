@@ -14,7 +14,15 @@ files do):
 - tangential ("shear") stretch ``lambda_t``: in 2D ``sqrt(t . C t)`` with ``t`` perpendicular to
   ``n`` in the plane; in 3D the largest stretch within the plane normal to ``n``, i.e. the
   square root of the largest eigenvalue of ``C`` restricted to that plane;
-- pressure ``-p`` [kPa], positive in compression (``p`` is tension-positive in the solver).
+- pressure ``-p`` [kPa], positive in compression (``p`` is tension-positive in the solver);
+- maximum shear stress ``tau_max = (sigma_1 - sigma_3) / 2`` [kPa], half the spread of the
+  principal Cauchy stresses ``sigma = tau / J`` (plane strain: of the 3D stress, ``sigma_33``
+  included). The paper's "large shear stresses around the opening edge" (its section 3, after
+  the linear analysis of the inverted punch, where the stress is singular as the inverse
+  square root of the distance to the edge); the pressure shifts all principal stresses alike
+  and drops out, so ``tau_max`` is the deviatoric stress's (``sqrt(3 J2)`` would be the von
+  Mises measure of the same deviator). From the same ``F`` as the stretches and each point's
+  material (:func:`brainbulge.materials.base.kirchhoff_deviator`).
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ from dataclasses import dataclass
 import ngsolve as ngs
 import numpy as np
 
+from brainbulge.materials.base import Material, kirchhoff_deviator
 from brainbulge.solver.mixed import MixedForm
 
 
@@ -38,6 +47,8 @@ class Samples:
     Js: np.ndarray  # (n,) current swelling
     #: (n,) ``det F`` of the solution itself (the constraint's ``J``), None: ``det F``
     J: np.ndarray | None = None
+    #: (n,) the maximum shear stress [kPa] (:func:`max_shear_stress`), None: not sampled
+    max_shear_stress: np.ndarray | None = None
 
 
 def sample(form: MixedForm, points: object,
@@ -60,7 +71,24 @@ def sample(form: MixedForm, points: object,
     F[:, :dim, :dim] += G
     F_raw = np.tile(np.eye(3), (len(X), 1, 1))
     F_raw[:, :dim, :dim] += G_raw
-    return Samples(X, u, F, p, Js, det3(F_raw))
+    materials = form.problem.materials
+    names = list(materials)
+    region = np.rint(np.asarray(form.mesh.MaterialCF(
+        {r: float(k) for k, r in enumerate(names)}, default=-1.0)(points)).reshape(-1))
+    tau_max = np.zeros(len(X))
+    for k, r in enumerate(names):
+        at = region == k
+        if at.any():
+            tau_max[at] = max_shear_stress(F[at], materials[r])
+    return Samples(X, u, F, p, Js, det3(F_raw), tau_max)
+
+
+def max_shear_stress(F: np.ndarray, material: Material) -> np.ndarray:
+    """``tau_max = (sigma_1 - sigma_3) / 2`` [kPa] at deformation gradients ``F`` (n, 3, 3)
+    of one ``material``: the spread of the eigenvalues of the Cauchy stress's deviator
+    ``dev sigma = dev tau / det F``."""
+    S = kirchhoff_deviator(material, F) / det3(F)[:, None, None]
+    return 0.5 * (largest_eigenvalue(S) + largest_eigenvalue(-S))
 
 
 def radial_directions(X: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -158,4 +186,5 @@ def output_fields(
         "Je": J / s.Js,
         "Js": s.Js,
         "pressure": -s.p,
+        **({} if s.max_shear_stress is None else {"max_shear_stress": s.max_shear_stress}),
     }

@@ -34,6 +34,7 @@ EXTREMES = {
     "radial_stretch": ("lambda_n", ("max", "min")),
     "tangential_stretch": ("lambda_t", ("max", "min")),
     "principal_strain": ("max_principal_strain", ("max",)),
+    "shear_stress": ("max_shear_stress", ("max",)),
 }
 #: volume percentiles reported per extreme kind: ``p95_*``, ``p99_*`` for maxima and ``p05_*``,
 #: ``p01_*`` for minima
@@ -42,7 +43,8 @@ PERCENTILES = {"max": (95, 99), "min": (5, 1)}
 CSF = "csf_"
 #: the short names of the fields in labels (the printout, the study's comparison)
 FIELD_LABELS = {"lambda_n": "lambda_n", "lambda_t": "lambda_t",
-                "max_principal_strain": "principal strain"}
+                "max_principal_strain": "principal strain",
+                "max_shear_stress": "max shear stress"}
 
 
 def stem_key(measure: str, stem: str, prefix: str = "") -> str:
@@ -111,7 +113,9 @@ _B, _H = frozenset({BRAIN}), frozenset({HEMIDISK})
 _WITH_CSF = "only when the mesh has CSF"
 #: the extremes whose sites ``extreme_sites`` and whose element values ``element_*`` are
 SITES = ("max_principal_strain", "max_radial_stretch", "min_radial_stretch",
-         "max_tangential_stretch")
+         "max_tangential_stretch", "max_shear_stress")
+#: those with element values ``element_*`` too (kinematic: the stress needs a material)
+ELEMENT_SITES = SITES[:4]
 
 #: every key of ``summary.json``, in the order of the docs' tables
 KEYS: tuple[Key, ...] = (
@@ -132,22 +136,34 @@ KEYS: tuple[Key, ...] = (
     _k("linear_iterations", "", "Krylov iterations over the whole run (0 with the direct "
        "solver)"),
     _k(("elements", "dofs"), "", "mesh elements, unknowns"),
-    _k("max_displacement", "length", "largest \\|u\\|", labels=("max |u|",)),
+    _k("max_displacement", "length", "largest \\|u\\| over all points (no exclusion: the "
+       "displacement is bounded everywhere)", labels=("max |u|",)),
+    _k("argmax_displacement", "length", "reference position of `max_displacement`"),
     _k(("max_vertical_displacement", "min_vertical_displacement"), "length",
        "extremes of u_y (2D) or u_z (3D, superior positive)"),
-    _k(extremes()[:2], "-", "extremes of λ_n (axonal stretch), edge points excluded",
+    _k(extremes()[:2], "-", "extremes of λ_n (axonal stretch) over the points outside the "
+       "edge disks (2D: radius `edge_exclusion` round each singular point; 3D: the rim band "
+       "`edge_exclusion_mm`). Where the field is singular (the opening's corners) such an "
+       "extreme sits on the disk's circle and is the radius's value: it grows as the radius "
+       "shrinks; `argmax_*` says where it is, `pXX_*`/`peak_*` are the region measures",
        labels=tuple(_STRETCH_LABELS[n] for n in extremes()[:2]), fmt=".4f"),
-    _k(extremes()[2:4], "-", "extremes of λ_t, edge points excluded",
+    _k(extremes()[2:4], "-", "extremes of λ_t over the same points (the same caveat)",
        labels=tuple(_STRETCH_LABELS[n] for n in extremes()[2:4]), fmt=".4f"),
-    _k(extremes()[4:], "-", "largest maximum principal Green–Lagrange strain, edge points "
+    _k(extremes()[4:5], "-", "largest maximum principal Green–Lagrange strain, edge points "
        "excluded", labels=(_STRETCH_LABELS[extremes()[4]],), fmt=".3g"),
-    _k(raws(), "-", "the same over all points", shown="`raw_max_*`, `raw_min_*`"),
+    _k(extremes()[5:], "kPa", "largest maximum shear stress (σ1 − σ3)/2 of the Cauchy "
+       "stress, edge points excluded: the deviator's (the pressure drops out); the paper's "
+       "\"large shear stresses around the opening edge\", singular there as the inverse "
+       "square root of the distance ([verification.md](verification.md))",
+       labels=(_STRETCH_LABELS[extremes()[5]],), fmt=".3g"),
+    _k(raws(), "-", "the same over all points (kPa for the shear stress)",
+       shown="`raw_max_*`, `raw_min_*`"),
     _k(percentiles(), "-", "volume percentiles over the same points as `max_*`/`min_*`: "
        "e.g. `p95_principal_strain` is the strain that 95 % of that volume stays below "
-       "(MPS95 of brain-injury studies); mesh-convergent where the extremes are not (below)",
-       shown=f"`{_PERCENT}"),
+       "(MPS95 of brain-injury studies); mesh-convergent where the extremes are not (below); "
+       "kPa for the shear stress", shown=f"`{_PERCENT}"),
     _k(argmaxes(), "length", "reference position of `max_radial_stretch` / "
-       "`max_tangential_stretch` / `max_principal_strain`"),
+       "`max_tangential_stretch` / `max_principal_strain` / `max_shear_stress`"),
     _k(("median_abs_Je_minus_1", "p95_abs_Je_minus_1"), "-", "how well `J = Js` holds: "
        "volume median and 95th percentile of \\|J/Js − 1\\| over all points. The constraint "
        "holds in the weak sense of the pressure space (∫ q (J − Js) dV = 0 for every pressure "
@@ -189,8 +205,11 @@ KEYS: tuple[Key, ...] = (
     _k("singular_points", "R", "their centres: the opening's corners and, for a sector, "
        "where its edges meet the arc and the centre of the base", cases=_H),
     _k("max_skull_crossing", "R", "the largest \\|x\\| − R > 0 of the deformed vertices "
-       "where the skull is (outside the opening), 0 when none: how far the bulge folds back "
-       "over the skull's arc", cases=_H),
+       "at an angle the skull covers (outside the opening), 0 when none: tissue where the "
+       "rigid skull is. No-slip: the bulge folding back over the skull's edge; sliding: the "
+       "opening's free surface next to the edge crossing the arc (only the skull-side "
+       "boundary is held on it), which `max_penetration` (of the held boundary) does not "
+       "see", cases=_H, labels=("skull crossing",), fmt=".2g"),
     # --- the brain's
     _k("swelling_reached", "-", "the white-matter Js reached", cases=_B, labels=("Js",),
        fmt=".3f"),
@@ -253,7 +272,8 @@ KEYS: tuple[Key, ...] = (
        fmt=".2g"),
     _k(peaks(), "-", "the value exceeded in 0.1 ml of the same points as `max_*`: the peak "
        "to compare between meshes and scenarios (a maximum of single points jumps by ±45 % "
-       "between meshes of one geometry; this one by 0-7 %)", cases=_B),
+       "between meshes of one geometry; this one by 0-7 %); kPa for the shear stress",
+       cases=_B),
     _k((*extremes(CSF), *raws(CSF), *percentiles(CSF), *peaks(CSF)), "-", "stretch and "
        "strain extremes, percentiles and peaks in the CSF filler, reported apart", cases=_B,
        when=_WITH_CSF, shown="`max_csf_*`, `min_csf_*`, `raw_*_csf_*`, `pXX_csf_*`, "
@@ -270,7 +290,8 @@ KEYS: tuple[Key, ...] = (
        "`linear_iterations` then include the coarse stage; `newton_iterations` and "
        "`load_steps` are the fine mesh's", cases=_B),
     _k("extreme_sites", "", "where `max_principal_strain`, `max_radial_stretch`, "
-       "`min_radial_stretch` and `max_tangential_stretch` are: for each, `X_mm` (reference "
+       "`min_radial_stretch`, `max_tangential_stretch` and `max_shear_stress` are: for "
+       "each, `X_mm` (reference "
        "position), `value`, `region`, `rim_distance_mm` (to the flap's rim), `under_flap` "
        "(inside the flap's cutting cylinder), `depth_mm` (below the skull's inner surface), "
        "`swelling_distance_mm` (to the nearest swelling element; 0 inside one), "
@@ -282,7 +303,7 @@ KEYS: tuple[Key, ...] = (
        "rim lies deep in the bulge; on a coarse mesh nearly every parenchyma element touches "
        "an interface, and an extreme whose `X_mm` recurs in other scenarios belongs to one "
        "element, not to the load (`results/measures/extreme_sites.py`)", cases=_B),
-    _k((*(f"element_{n}" for n in SITES), "element_sites"), "-",
+    _k((*(f"element_{n}" for n in ELEMENT_SITES), "element_sites"), "-",
        "the same extremes of the element values (the stretches of the element-constant "
        "gradient of the P1 displacement, what a linear tetrahedron reports per element) over "
        "the same parenchyma outside the rim band, and their sites (as above, without "
@@ -298,6 +319,7 @@ FIELDS: tuple[Key, ...] = (
     _k("u_magnitude", "length", "\\|u\\|"),
     _k("u_vertical", "length", "u_y (2D) or u_z (3D)"),
     _k(("lambda_n", "lambda_t", "max_principal_strain"), "-", "as above"),
+    _k("max_shear_stress", "kPa", "as above"),
     _k(("J", "Je", "Js"), "-", "as above"),
     _k("pressure", "kPa", "as above"),
     _k("contact_pressure", "kPa", "skull contact pressure at the vertex: the force per "

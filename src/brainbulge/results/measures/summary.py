@@ -54,6 +54,8 @@ def field_extremes(
     """``max_*``/``min_*`` over ``keep``, ``raw_*`` over all points, and argmax locations."""
     out: dict[str, object] = {}
     for stem, (name, kinds) in EXTREMES.items():
+        if name not in fields:  # the shear stress of samples without materials
+            continue
         v = fields[name]
         for kind in kinds:
             f = np.argmax if kind == "max" else np.argmin
@@ -143,6 +145,8 @@ def field_percentiles(
     if not keep.any() or w.sum() <= 0:
         return out
     for stem, (name, kinds) in EXTREMES.items():
+        if name not in fields:
+            continue
         v = np.asarray(fields[name], dtype=float)[keep]
         for kind in kinds:
             qs = PERCENTILES[kind]
@@ -305,6 +309,7 @@ def solution_summary(
         "elements": form.mesh.ne,
         "dofs": form.fes.ndof,
         "max_displacement": float(fields["u_magnitude"].max()),
+        "argmax_displacement": [float(c) for c in X[int(np.argmax(fields["u_magnitude"]))]],
         "max_vertical_displacement": float(fields["u_vertical"].max()),
         "min_vertical_displacement": float(fields["u_vertical"].min()),
     }
