@@ -7,10 +7,11 @@ the opening, of zero thickness with a sharp edge (:class:`SkullArc2D`); the open
 traction-free and meets no obstacle.
 
 - ``noslip``: ``u = 0`` on the skull arc ("the boundary nodes are fixed");
-- ``sliding``: the skull arc's boundary slides without friction on the circle ``r = R`` over
-  the skull's angular extent, may separate inward, and is released once it passes the edge
-  (unilateral contact with :class:`SkullArc2D`), so the tissue "rotates outward around the
-  opening edge".
+- ``sliding``: the skull arc's boundary slides without friction on the circle ``r = R`` and
+  may separate inward (unilateral contact with :class:`SkullArc2D`). The material arc stays
+  on the circle's side also where it slides past the edge's angle (it is not released there),
+  so the skull's sharp edge can end up inside the tissue: ``max_skull_crossing`` reports by
+  how much (docs/design.md, "2D sliding at the paper's sharp edge").
 
 ``skull = "rigid"``, an extension: a rigid shell of thickness ``skull_thickness`` with cut
 edges rounded by ``skull_edge_radius`` (:class:`RigidSkull2D`), the rounding in the bone.
