@@ -15,6 +15,11 @@ displacement block and of the Schur approximation; the first iteration only), GM
 the rest (residuals of the line search). Columns: peak MB in the phase, RSS MB at its end.
 The last lines give what must not change with a memory lever: Newton's scaled residuals
 and the GMRES iterations per solve.
+
+With ``--trace`` the table adds what Python's ``tracemalloc`` sees (NumPy's arrays among it,
+not NGSolve's or Numba's own memory): the live memory at the phase's peak and at its end.
+Freed arrays stay on the process's heap (``brainbulge.heap``), so the RSS follows the
+highest live memory so far; the traced columns show what each phase holds.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import argparse
 import functools
 import time
+import tracemalloc
 from pathlib import Path
 
 from brainbulge.runtime import configure as configure_runtime
@@ -39,7 +45,7 @@ class PhasePeaks:
     """Peak and end RSS of consecutive phases (Linux ``VmHWM``, reset at each mark)."""
 
     def __init__(self) -> None:
-        self.rows: list[tuple[str, float, float, float]] = []
+        self.rows: list[tuple[str, float, float, float, float, float]] = []
         self.label = "start"
         self.t0 = time.perf_counter()
         self._reset()
@@ -48,11 +54,14 @@ class PhasePeaks:
     def _reset() -> None:
         with open("/proc/self/clear_refs", "w") as f:
             f.write("5")
+        tracemalloc.reset_peak()
 
     def mark(self, next_label: str) -> None:
         """End the current phase (its peak and end RSS), start ``next_label``."""
         t = time.perf_counter()
-        self.rows.append((self.label, _status_mb("VmHWM"), _status_mb("VmRSS"), t - self.t0))
+        live, live_peak = (v / 2**20 for v in tracemalloc.get_traced_memory())
+        self.rows.append((self.label, _status_mb("VmHWM"), _status_mb("VmRSS"), t - self.t0,
+                          live_peak, live))
         self.label, self.t0 = next_label, t
         self._reset()
 
@@ -71,20 +80,80 @@ class PhasePeaks:
         setattr(obj, name, phase)
 
     def table(self) -> str:
-        lines = ["| phase | peak MB | end MB | s |", "|---|---|---|---|"]
-        lines += [f"| {label} | {peak:,.0f} | {end:,.0f} | {dt:.1f} |"
-                  for label, peak, end, dt in self.rows]
+        traced = tracemalloc.is_tracing()
+        lines = ["| phase | peak MB | end MB | s |" + (" traced peak MB | traced end MB |"
+                                                       if traced else ""),
+                 "|---|---|---|---|" + ("---|---|" if traced else "")]
+        for label, peak, end, dt, live_peak, live in self.rows:
+            lines.append(f"| {label} | {peak:,.0f} | {end:,.0f} | {dt:.1f} |"
+                         + (f" {live_peak:,.0f} | {live:,.0f} |" if traced else ""))
         top = max(self.rows[1:], key=lambda r: r[1])
         lines.append(f"\nhighest peak: {top[1]:,.0f} MB ({top[0]})")
         return "\n".join(lines)
+
+
+def held_mb(root, seen: set[int] | None = None) -> float:
+    """MB of the NumPy arrays reachable from ``root`` (attributes, containers, sparse
+    matrices), each buffer counted once across calls sharing ``seen``."""
+    import numpy as np
+
+    seen = set() if seen is None else seen
+    total = 0
+    stack = [root]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, np.ndarray):
+            base = obj
+            while isinstance(base.base, np.ndarray):
+                base = base.base
+            if id(base) not in seen or base is obj:
+                seen.add(id(base))
+                total += base.nbytes
+            continue
+        if isinstance(obj, dict):
+            stack.extend(obj.values())
+        elif isinstance(obj, (list, tuple, set)):
+            stack.extend(obj)
+        elif hasattr(obj, "__dict__") and type(obj).__module__.split(".")[0] in (
+                "brainbulge", "scipy", "pyamg", "__main__"):
+            stack.extend(v for k, v in vars(obj).items() if k != "form")
+    return total / 2**20
+
+
+def held_table(ns) -> str:
+    """What the Newton solver's parts hold after the last iteration (MB, shared arrays
+    counted at their first owner)."""
+    seen: set[int] = set()
+    lin = ns.linear
+    parts = [("closed-form tangent (pattern, bubble operators)", ns.closed),
+             ("free-part plan", ns._free_part),
+             ("contact elimination plan", ns._project_elimination),
+             ("Krylov block plans", lin._block_plans),
+             ("displacement AMG (plan, hierarchy)", lin.amg_u),
+             ("Schur AMG", lin.amg_p)]
+    lines = ["| part | MB |", "|---|---|"]
+    lines += [f"| {name} | {held_mb(obj, seen):,.0f} |" for name, obj in parts]
+    ml = getattr(lin.amg_u, "ml", None)
+    for i, lvl in enumerate(ml.levels if ml is not None else []):
+        lines.append(f"| displacement AMG level {i}: " + ", ".join(
+            f"{name} {held_mb(getattr(lvl, name), set()):,.0f}" for name in ("A", "P", "R")
+            if hasattr(lvl, name)) + " |  |")
+    return "\n".join(lines)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--mesh", type=Path, required=True, help="brain.npz of brainbulge mesh")
     ap.add_argument("--iterations", type=int, default=2, help="Newton iterations (default 2)")
+    ap.add_argument("--trace", action="store_true",
+                    help="also the live memory that tracemalloc sees (slower)")
     args = ap.parse_args()
     configure_runtime()
+    if args.trace:
+        tracemalloc.start()
     peaks = PhasePeaks()
     peaks.mark("problem")
 
@@ -110,6 +179,7 @@ def main() -> None:
     peaks.mark("end")
     print(f"{form.mesh.ne:,} tets, {len(ns.free):,} free DOFs\n")
     print(peaks.table())
+    print(held_table(ns))
     print("Newton |R|:", " ".join(f"{r:.6e}" for r in ns.history[-1]))
     print("GMRES iterations:", ns.linear.stats.iterations)
 
