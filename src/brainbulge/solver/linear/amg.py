@@ -59,7 +59,7 @@ class AMGCycle:
 
     def _pad_block(self, M: sp.csr_matrix) -> sp.csr_matrix:
         A = M if self.index is None else M[self.index][:, self.index]
-        return self._pad(A, 0.0)
+        return self._pad(A)
 
     def _fill(self, M: sp.spmatrix) -> float:
         """The diagonal of the identity rows at unused slots: the mean diagonal of ``A``."""
@@ -68,11 +68,13 @@ class AMGCycle:
             diag = diag[self.index]
         return float(np.mean(diag[diag > 0])) if np.any(diag > 0) else 1.0
 
-    def _pad(self, A: sp.spmatrix, fill: float) -> sp.csr_matrix:
+    def _pad(self, A: sp.spmatrix) -> sp.csr_matrix:
+        """``A`` moved to its slots, with zero diagonal entries at the unused ones (the
+        padding plan fills them with :meth:`_fill`)."""
         coo = A.tocoo()
         rows = np.concatenate([self.slot[coo.row], self.empty])
         cols = np.concatenate([self.slot[coo.col], self.empty])
-        vals = np.concatenate([coo.data, np.full(len(self.empty), fill)])
+        vals = np.concatenate([coo.data, np.zeros(len(self.empty), dtype=coo.data.dtype)])
         Ap = sp.csr_matrix((vals, (rows, cols)), shape=(self.n_pad, self.n_pad))
         Ap.sum_duplicates()
         Ap.sort_indices()
