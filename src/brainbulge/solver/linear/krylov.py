@@ -50,7 +50,7 @@ import scipy.sparse as sp
 from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.solver.linear.amg import AMGCycle, HierarchicalTwoLevel
 from brainbulge.solver.linear.layout import DisplacementLayout, displacement_layout, free_dofs
-from brainbulge.solver.linear.sparse_reuse import PatternGather
+from brainbulge.solver.linear.sparse_reuse import PatternGather, canonical
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -173,18 +173,28 @@ class BlockKrylovSolver:
         """``S~ = C + B diag(A)^-1 B^T`` (SIMPLE's Schur complement) over the pressures
         (``a_diag``: the diagonal of ``A``), its
         couplings weaker than ``SCHUR_DROP sqrt(|S_ii S_jj|)`` lumped onto the diagonal
-        (stays SPD, a cheaper V-cycle). A subclass may approximate ``S`` otherwise."""
+        (stays SPD, a cheaper V-cycle). A subclass may approximate ``S`` otherwise.
+
+        The weak entries are dropped from the CSR arrays and the lumps added to the stored
+        diagonal in place: no COO copy of the distance-2 stencil, no second CSR."""
         n_p = len(self.ip)
         Bt = Bt[:, :n_p]
-        S = (Bt.T @ sp.diags(self._d_inv(a_diag)) @ Bt + C[:n_p][:, :n_p]).tocoo()
+        S = canonical(Bt.T @ sp.diags(self._d_inv(a_diag)) @ Bt + C[:n_p][:, :n_p])
+        S.sum_duplicates()
         dg = S.diagonal()
-        weak = np.abs(S.data) < SCHUR_DROP * np.sqrt(np.abs(dg[S.row] * dg[S.col]))
-        weak &= S.row != S.col
-        lump = np.bincount(S.row[weak], np.abs(S.data[weak]), minlength=S.shape[0])
+        row = np.repeat(np.arange(n_p, dtype=S.indices.dtype), np.diff(S.indptr))
+        weak = np.abs(S.data) < SCHUR_DROP * np.sqrt(np.abs(dg[row] * dg[S.indices]))
+        weak &= row != S.indices
+        lump = np.bincount(row[weak], np.abs(S.data[weak]), minlength=n_p)
+        indptr = np.zeros(n_p + 1, dtype=np.int64)
+        np.cumsum(np.bincount(row[~weak], minlength=n_p), out=indptr[1:])
+        del row
         keep = ~weak
-        S = sp.csr_matrix((S.data[keep], (S.row[keep], S.col[keep])), shape=S.shape)
+        S = sp.csr_matrix((S.data[keep], S.indices[keep], indptr), shape=S.shape)
+        S.has_sorted_indices = True
+        S.setdiag(S.diagonal() + lump)  # the diagonal is stored (SIMPLE's is positive)
         self.stats.schur_builds += 1
-        return (S + sp.diags(lump)).tocsr()
+        return S
 
     def setup(self, K: sp.csr_matrix, blocks: tuple | None = None) -> None:
         """Build the AMG hierarchies (displacement block, and the Schur approximation);
