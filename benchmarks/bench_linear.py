@@ -68,7 +68,7 @@ def mass_schur_solver(mass):
     from brainbulge.solver.linear.krylov import BlockKrylovSolver
 
     class MassSchur(BlockKrylovSolver):
-        def schur_matrix(self, A, Bt, C):
+        def schur_matrix(self, a_diag, Bt, C):
             n_p = len(self.ip)
             self.stats.schur_builds += 1
             return (mass + C[:n_p][:, :n_p]).tocsr()

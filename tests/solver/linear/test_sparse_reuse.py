@@ -122,8 +122,11 @@ def _normals(rows_per_point: list[list[int]], n: int, seed: int) -> sp.csc_matri
 
 
 def test_projection_on_the_pattern_matches_the_dense_formula_and_keeps_its_plan() -> None:
+    """In place on K's values (no second copy of them), which restore() puts back; a new
+    call restores first."""
     nodes = 20
     K = _node_matrix(8, nodes)
+    K0 = K.toarray()
     n = K.shape[0]
     points = [[c * nodes + a for c in range(3)] for a in (2, 5, 7)]
     points.append([0 * nodes + 9, 2 * nodes + 9])  # a node with one component held
@@ -132,27 +135,47 @@ def test_projection_on_the_pattern_matches_the_dense_formula_and_keeps_its_plan(
         N = _normals(points, n, seed)
         P = (N @ N.T).toarray()
         Pi = np.eye(n) - P
-        want = Pi @ K.toarray() @ Pi + 0.7 * P
+        want = Pi @ K0 @ Pi + 0.7 * P
         got = project(K, N, 0.7)
         np.testing.assert_allclose(got.toarray(), want, atol=1e-13)
         assert got.nnz == K.nnz  # K's pattern
+        assert np.shares_memory(got.data, K.data)
+        np.testing.assert_allclose(K.toarray(), want, atol=1e-13)
     assert project.plans == 1  # planned, not SciPy's products
+    project.restore()
+    np.testing.assert_array_equal(K.toarray(), K0)
     N = _normals(points[:2], n, 2)  # another active set: a new plan
     P = (N @ N.T).toarray()
     Pi = np.eye(n) - P
-    np.testing.assert_allclose(project(K, N, 0.7).toarray(),
-                               Pi @ K.toarray() @ Pi + 0.7 * P, atol=1e-13)
+    np.testing.assert_allclose(project(K, N, 0.7).toarray(), Pi @ K0 @ Pi + 0.7 * P,
+                               atol=1e-13)
     assert project.plans == 2
+    project.restore()
+    project.restore()  # twice: nothing more to put back
+    np.testing.assert_array_equal(K.toarray(), K0)
+
+
+def _add_entry(K: sp.csr_matrix, i: int, j: int) -> sp.csr_matrix:
+    assert K[i, j] == 0 and K[j, i] == 0
+    return (K + sp.csr_matrix(([1.0], ([i], [j])), shape=K.shape)).tocsr()
 
 
 def test_projection_falls_back_to_scipy_off_the_node_structure() -> None:
+    """Where a constrained DOF's column is not its row's transpose: SciPy's products, K
+    left alone; an unsymmetric entry away from the constrained rows and columns does not
+    matter."""
     K = _node_matrix(9)
-    K = (K + sp.csr_matrix(([1.0], ([0], [K.shape[0] - 1])), shape=K.shape)).tocsr()  # unsymmetric
     n = K.shape[0]
     N = _normals([[1, 21, 41]], n, 3)
     P = (N @ N.T).toarray()
     Pi = np.eye(n) - P
-    project = PatternProject()
-    np.testing.assert_allclose(project(K, N, 2.0).toarray(),
-                               Pi @ K.toarray() @ Pi + 2.0 * P, atol=1e-13)
-    assert project.plans == 0  # unsymmetric pattern: SciPy's products
+    far = next(j for j in range(n) if j not in (1, 21, 41) and K[0, j] == 0 and K[j, 0] == 0)
+    near = next(i for i in range(n) if K[i, 21] == 0 and K[21, i] == 0)
+    for K1, plans in ((_add_entry(K, 0, far), 1), (_add_entry(K, near, 21), 0)):
+        K0 = K1.toarray()
+        project = PatternProject()
+        np.testing.assert_allclose(project(K1, N, 2.0).toarray(),
+                                   Pi @ K0 @ Pi + 2.0 * P, atol=1e-13)
+        assert project.plans == plans  # 0: SciPy's products
+        project.restore()
+        np.testing.assert_array_equal(K1.toarray(), K0)

@@ -73,12 +73,17 @@ class NodalElimination:
     for the AMG (the augmented form's stiff ``r B^T B`` springs cost GMRES ~4x the
     iterations of a clamped skull) and no zero-diagonal contact rows for PARDISO's symmetric
     factorisation. Written by hand: no library we use eliminates such constraints.
+
+    The projected matrix is ``K`` itself, changed in place at the constrained rows and
+    columns (:class:`PatternProject`): from :meth:`system` until :meth:`recover`, or until
+    the next elimination made with the same ``project``, ``K`` holds the projected values.
     """
 
     def __init__(self, K: sp.csr_matrix, B: sp.csr_matrix, c: np.ndarray,
                  is_u: np.ndarray, project: PatternProject | None = None) -> None:
-        self.K = K
         self._project = project or PatternProject()
+        self._project.restore()  # K's own values (a failed solve left them projected)
+        self.K = K
         self.beta = np.sqrt(np.asarray(B.multiply(B).sum(axis=1)).ravel())
         self.N = (B.T @ sp.diags(1.0 / self.beta)).tocsc()
         self.gbar = -np.asarray(c) / self.beta
@@ -98,13 +103,15 @@ class NodalElimination:
         """``(Pi K Pi + d N N^T, Pi (b - K N gbar))``."""
         K, N = self.K, self.N
         self._b = b
+        rhs = self.project(b - K @ (N @ self.gbar))
         # on K's pattern (Pi K Pi + d P lies in the node blocks K couples), so that the
-        # Krylov solver's block plans stay valid whatever the active set
-        Kp = self._project(K, N, self.d)
-        return Kp, self.project(b - K @ (N @ self.gbar))
+        # Krylov solver's block plans stay valid whatever the active set; in place
+        return self._project(K, N, self.d), rhs
 
     def recover(self, y: np.ndarray) -> np.ndarray:
-        """``[dx, dlam]`` from the solution ``y`` of :meth:`system`."""
+        """``[dx, dlam]`` from the solution ``y`` of :meth:`system` (``K`` back to its own
+        values)."""
+        self._project.restore()
         dx = self.project(y) + self.N @ self.gbar
         dlam = (self.N.T @ (self.K @ dx - self._b)) / self.beta
         return np.concatenate([dx, dlam])

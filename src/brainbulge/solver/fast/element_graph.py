@@ -69,7 +69,8 @@ def _pattern_rows(ext, ndof, ptr, adj, maxlen, nthreads, count_only, indptr, ind
 
 def element_pattern(ext: np.ndarray, ndof: int) -> sp.csr_matrix:
     """The sparsity pattern of the condensed tangent: every pair of an element's external
-    DOFs ``ext`` (ne x 16), as NGSolve's matrix graph has it (sorted columns, int32)."""
+    DOFs ``ext`` (ne x 16), as NGSolve's matrix graph has it (sorted columns, int32,
+    read-only index arrays)."""
     ne, m = ext.shape
     flat = ext.ravel()
     ptr = np.zeros(ndof + 1, dtype=np.int64)
@@ -83,5 +84,8 @@ def element_pattern(ext: np.ndarray, ndof: int) -> sp.csr_matrix:
     np.cumsum(lengths, out=indptr[1:])
     indices = np.empty(indptr[-1], dtype=np.int64)
     _pattern_rows(ext, ndof, ptr, adj, maxlen, nt, False, indptr, indices)
-    return sp.csr_matrix((np.zeros(len(indices)), indices.astype(np.int32),
-                          indptr.astype(np.int32)), shape=(ndof, ndof))
+    indices, indptr = indices.astype(np.int32), indptr.astype(np.int32)
+    # read-only: every tangent shares them, and so can the plans that slice the tangents
+    # (brainbulge.solver.linear.sparse_reuse keeps a writeable pattern as a copy)
+    indices.flags.writeable = indptr.flags.writeable = False
+    return sp.csr_matrix((np.zeros(len(indices)), indices, indptr), shape=(ndof, ndof))

@@ -50,7 +50,7 @@ import scipy.sparse as sp
 from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.solver.linear.amg import AMGCycle, HierarchicalTwoLevel
 from brainbulge.solver.linear.layout import DisplacementLayout, displacement_layout, free_dofs
-from brainbulge.solver.linear.sparse_reuse import PatternGather
+from brainbulge.solver.linear.sparse_reuse import PatternGather, canonical
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -132,9 +132,11 @@ class BlockKrylovSolver:
         slot = dim * node_idx + layout.component[lin]
         B = np.zeros((dim * len(nodes), 3 if dim == 2 else 6))
         B[slot] = layout.rigid_body_modes()[lin]
-        amg_1 = AMGCycle(dim * len(nodes), slot, dim, B, amg or {})
-        # MINI: the AMG alone; Taylor-Hood: around it, Gauss-Seidel on the P2 block
-        self.amg_u = amg_1 if lin.all() else HierarchicalTwoLevel(lin, amg_1)
+        # MINI: the AMG alone, on K's displacement rows; Taylor-Hood: around it (on the P1
+        # rows of the displacement block), Gauss-Seidel on the P2 block
+        amg_1 = AMGCycle(dim * len(nodes), slot, dim, B, amg or {},
+                         index=self.iu if lin.all() else np.flatnonzero(lin))
+        self.amg_u = amg_1 if lin.all() else HierarchicalTwoLevel(self.iu, amg_1)
         self.amg_p = AMGCycle(len(self.ip), np.arange(len(self.ip)), 1, None, amg or {})
 
     @classmethod
@@ -146,47 +148,61 @@ class BlockKrylovSolver:
         return cls(is_u, displacement_layout(form, free), **options)
 
     # --- set-up and reuse ----------------------------------------------------------------
-    def _blocks(self, K: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
-        """``A``, ``B^T`` and ``C`` over the multiplier DOFs: the pressures, then any rows of
-        ``K`` beyond ``len(is_u)`` (e.g. contact multipliers of an active set)."""
+    def _blocks(self, K: sp.csr_matrix) -> tuple[np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+        """The diagonal of ``A``, ``B^T`` and ``C`` over the multiplier DOFs: the pressures,
+        then any rows of ``K`` beyond ``len(is_u)`` (e.g. contact multipliers of an active
+        set). ``A`` itself is not cut out: its AMG gathers its finest level from ``K``."""
         n0 = len(self.is_u)
         if K.shape[0] < n0:
             raise InputError(f"the matrix has {K.shape[0]} rows, fewer than is_u ({n0})")
         if self._block_plans_rows != K.shape[0]:  # another number of multiplier rows
             iu, iq = self.iu, np.concatenate([self.ip, np.arange(n0, K.shape[0])])
-            self._block_plans = (PatternGather(lambda M: M[iu][:, iu]),
-                                 PatternGather(lambda M: M[iu][:, iq]),
+            self._block_plans = (PatternGather(lambda M: M[iu][:, iq]),
                                  PatternGather(lambda M: M[iq][:, iq]))
             self._block_plans_rows = K.shape[0]
-        A, Bt, Cneg = (plan(K) for plan in self._block_plans)
-        return A, Bt, -Cneg
+        Bt, Cneg = (plan(K) for plan in self._block_plans)
+        Cneg.data *= -1.0  # (its own values: a gather)
+        return K.diagonal()[self.iu], Bt, Cneg
 
-    def _d_inv(self, A: sp.csr_matrix) -> np.ndarray:
-        d = np.abs(A.diagonal())
+    @staticmethod
+    def _d_inv(a_diag: np.ndarray) -> np.ndarray:
+        d = np.abs(a_diag)
         return np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
 
-    def schur_matrix(self, A, Bt, C) -> sp.csr_matrix:
-        """``S~ = C + B diag(A)^-1 B^T`` (SIMPLE's Schur complement) over the pressures, its
+    def schur_matrix(self, a_diag: np.ndarray, Bt, C) -> sp.csr_matrix:
+        """``S~ = C + B diag(A)^-1 B^T`` (SIMPLE's Schur complement) over the pressures
+        (``a_diag``: the diagonal of ``A``), its
         couplings weaker than ``SCHUR_DROP sqrt(|S_ii S_jj|)`` lumped onto the diagonal
-        (stays SPD, a cheaper V-cycle). A subclass may approximate ``S`` otherwise."""
+        (stays SPD, a cheaper V-cycle). A subclass may approximate ``S`` otherwise.
+
+        The weak entries are dropped from the CSR arrays and the lumps added to the stored
+        diagonal in place: no COO copy of the distance-2 stencil, no second CSR."""
         n_p = len(self.ip)
         Bt = Bt[:, :n_p]
-        S = (Bt.T @ sp.diags(self._d_inv(A)) @ Bt + C[:n_p][:, :n_p]).tocoo()
+        S = canonical(Bt.T @ sp.diags(self._d_inv(a_diag)) @ Bt + C[:n_p][:, :n_p])
+        S.sum_duplicates()
         dg = S.diagonal()
-        weak = np.abs(S.data) < SCHUR_DROP * np.sqrt(np.abs(dg[S.row] * dg[S.col]))
-        weak &= S.row != S.col
-        lump = np.bincount(S.row[weak], np.abs(S.data[weak]), minlength=S.shape[0])
+        row = np.repeat(np.arange(n_p, dtype=S.indices.dtype), np.diff(S.indptr))
+        weak = np.abs(S.data) < SCHUR_DROP * np.sqrt(np.abs(dg[row] * dg[S.indices]))
+        weak &= row != S.indices
+        lump = np.bincount(row[weak], np.abs(S.data[weak]), minlength=n_p)
+        indptr = np.zeros(n_p + 1, dtype=np.int64)
+        np.cumsum(np.bincount(row[~weak], minlength=n_p), out=indptr[1:])
+        del row
         keep = ~weak
-        S = sp.csr_matrix((S.data[keep], (S.row[keep], S.col[keep])), shape=S.shape)
+        S = sp.csr_matrix((S.data[keep], S.indices[keep], indptr), shape=S.shape)
+        S.has_sorted_indices = True
+        S.setdiag(S.diagonal() + lump)  # the diagonal is stored (SIMPLE's is positive)
         self.stats.schur_builds += 1
-        return (S + sp.diags(lump)).tocsr()
+        return S
 
-    def setup(self, K: sp.csr_matrix) -> None:
-        """Build the AMG hierarchies (displacement block, and the Schur approximation)."""
+    def setup(self, K: sp.csr_matrix, blocks: tuple | None = None) -> None:
+        """Build the AMG hierarchies (displacement block, and the Schur approximation);
+        ``blocks``: :meth:`_blocks` of ``K`` if already cut."""
         t0 = time.perf_counter()
-        A, Bt, C = self._blocks(K)
-        self.amg_u.setup(A)
-        self.amg_p.setup(self.schur_matrix(A, Bt, C))
+        a_diag, Bt, C = self._blocks(K) if blocks is None else blocks
+        self.amg_u.setup(K)
+        self.amg_p.setup(self.schur_matrix(a_diag, Bt, C))
         self._schur_stale = False
         self._ready = True
         self._ref_iterations = None
@@ -212,27 +228,27 @@ class BlockKrylovSolver:
         self._block_plans, self._block_plans_rows = (), -1
         self._ready = False
 
-    def _update(self, K: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+    def _update(self, K: sp.csr_matrix) -> tuple[np.ndarray, sp.csr_matrix, sp.csr_matrix]:
         """New matrix: rebuild the hierarchies or reuse them (finest level refreshed)."""
+        blocks = self._blocks(K)
         if not self._ready or self._refresh_requested:
-            self.setup(K)
-            return self._blocks(K)
-        A, Bt, C = self._blocks(K)
-        self.amg_u.update(A)
+            self.setup(K, blocks)
+            return blocks
+        self.amg_u.update(K)
         if self._schur_stale:
-            self.amg_p.update(self.schur_matrix(A, Bt, C))
+            self.amg_p.update(self.schur_matrix(*blocks))
             self._schur_stale = False
-        return A, Bt, C
+        return blocks
 
     # --- preconditioner ------------------------------------------------------------------
-    def _preconditioner(self, A, Bt, C) -> Callable[[np.ndarray], np.ndarray]:
+    def _preconditioner(self, a_diag: np.ndarray, Bt, C) -> Callable[[np.ndarray], np.ndarray]:
         """``z = P^-1 r``: ``z_q = -S~^-1 r_q``, then ``z_u = A~^-1 (r_u - B^T z_q)``."""
         iu = self.iu
         n0, n_p = len(self.is_u), len(self.ip)
         iq = np.concatenate([self.ip, np.arange(n0, n0 + Bt.shape[1] - n_p)])
         amg_u, amg_p = self.amg_u, self.amg_p
         # extra multipliers (rows beyond is_u): diag(B D^-1 B^T + C) of their own
-        d_inv = self._d_inv(A)
+        d_inv = self._d_inv(a_diag)
         Bt_e = Bt[:, n_p:]
         e_diag = (Bt_e.multiply(Bt_e)).T @ d_inv + np.maximum(C.diagonal()[n_p:], 0.0)
         e_inv = np.divide(1.0, e_diag, out=np.zeros_like(e_diag), where=e_diag > 0)
@@ -257,9 +273,9 @@ class BlockKrylovSolver:
         """
         rtol = self.rtol if rtol is None else rtol
         t0 = time.perf_counter()
-        A, Bt, C = self._update(K)
+        blocks = self._update(K)
         with serial_openblas():  # small BLAS-2 work: threads cost more than they give
-            x, its, res = self._krylov(K, r, rtol, self._preconditioner(A, Bt, C), x0)
+            x, its, res = self._krylov(K, r, rtol, self._preconditioner(*blocks), x0)
         if self._ref_iterations is None:
             self._ref_iterations = max(its, 1)
         elif its > self.refresh_factor * self._ref_iterations:

@@ -14,6 +14,7 @@ Written by hand: SciPy has no pattern-reusing slicing or addition.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -104,13 +105,14 @@ class PatternGather:
     def __call__(self, K: sp.spmatrix) -> sp.csr_matrix:
         K = canonical(K)
         if not self._pattern.matches(K):
-            # positions + 1, so that entries the transform creates (0) stand out; exact in
-            # float64 up to 2^53 entries
-            index = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=np.float64), K.indices,
+            # positions + 1, so that entries the transform creates (0) stand out; as int32
+            # where they fit: a plan of the 1.54M-tet tangent holds 69M of them, and the
+            # transform's copies of them cost half of float64's (at 495k tets the first
+            # tangent's free-part plan peaked 0.2 GB lower)
+            itype = np.int32 if K.nnz < 2**31 - 1 else np.int64
+            index = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=itype), K.indices,
                                    K.indptr), shape=K.shape)
             T = canonical(sp.csr_matrix(self.transform(index)))
-            # int32 where it fits: a plan of the 1.54M-tet tangent holds 69M of them
-            itype = np.int32 if K.nnz < 2**31 - 1 else np.int64
             self._take = T.data.astype(itype) - 1
             self._indptr, self._indices = _frozen(T.indptr), _frozen(T.indices)
             self._shape = T.shape
@@ -199,42 +201,52 @@ class PatternProject:
     whose orthonormal columns each live on the DOFs of one node (the nodal elimination of
     contact constraints: column ``j`` of ``N`` is the unit normal at contact point ``j``).
 
-    Written on the values: where ``K``'s pattern is structurally symmetric and the rows of a
-    node's DOFs share one column pattern (a vector P1 space), ``Pi K`` mixes the rows of each
-    constrained node, ``(Pi K) Pi`` its columns (at the transposed positions, found once per
-    pattern of ``K``), and ``d P`` lands in the node's diagonal block. Those positions are
-    planned once per pattern of ``K`` and set of constrained DOFs (the active set); a call
-    then costs a few gathers over the constrained rows and columns. Any other case falls
-    back to SciPy products added by :class:`PatternAdd`, which took ~2.5 s of sparse
-    products plus the addition per call at 1.54M tets.
+    Written on the values, in place: where the rows of a node's DOFs share one column pattern
+    (a vector P1 space) and that pattern is symmetric around them, ``Pi K`` mixes the rows of
+    each constrained node, ``(Pi K) Pi`` its columns (at the transposed positions), and
+    ``d P`` lands in the node's diagonal block. Those positions are planned once per pattern
+    of ``K`` and set of constrained DOFs (the active set); a call then costs a few gathers
+    over the constrained rows and columns.
+
+    The projected matrix shares ``K``'s values: ``K.data`` holds ``Pi K Pi + d P`` at the
+    constrained rows and columns until :meth:`restore` (or the next call) puts the saved
+    values back. So the Newton step keeps one copy of the tangent's values, not two (0.5 GB
+    at 1.40M tets). Any other case falls back to SciPy products added by
+    :class:`PatternAdd` on a copy (~2.5 s per call at 1.54M tets), ``K`` left alone.
     """
 
     def __init__(self) -> None:
         self._pattern = _Pattern()
-        self._perm: np.ndarray | None = None  # position of each entry's transpose
         self._dofs = np.zeros(0, dtype=np.int64)  # N's pattern the plan was made for
         self._dofs_ptr = np.zeros(0, dtype=np.int64)
         self._plan: list[tuple[np.ndarray, ...]] | None = None
+        self._touched = np.zeros(0, dtype=np.int64)  # the positions the plan changes
+        self._column_counts = np.zeros(0, dtype=np.int64)  # entries per column of K
+        self._saved: tuple[weakref.ref, np.ndarray, np.ndarray] | None = None
         self._add = PatternAdd()
         self.plans = 0  # how many active-set plans were made (0: SciPy's products)
 
     def __call__(self, K: sp.spmatrix, N: sp.spmatrix, d: float) -> sp.csr_matrix:
+        self.restore()
         K = canonical(K)
         if not self._pattern.matches(K):
-            self._perm = _transpose_positions(K)
             self._pattern.remember(K)
-            self._plan = None
+            self._column_counts = np.bincount(K.indices, minlength=K.shape[1])
+            self._dofs_ptr = np.zeros(0, dtype=np.int64)  # a new plan
         Nc = sp.csc_matrix(N)
         Nc.sort_indices()
-        same_set = (np.array_equal(Nc.indptr, self._dofs_ptr)
-                    and np.array_equal(Nc.indices, self._dofs))
-        if self._perm is not None and not same_set:
-            self._plan = _projection_plan(K, Nc, self._perm)
+        if not (np.array_equal(Nc.indptr, self._dofs_ptr)
+                and np.array_equal(Nc.indices, self._dofs)):
+            self._plan = _projection_plan(K, Nc, self._column_counts)
             self._dofs, self._dofs_ptr = Nc.indices.copy(), Nc.indptr.copy()
+            self._touched = (np.unique(np.concatenate([a.ravel() for g in self._plan
+                                                       for a in g[2:]]))
+                             if self._plan is not None else np.zeros(0, dtype=np.int64))
             self.plans += self._plan is not None
-        if self._perm is None or self._plan is None:
+        if self._plan is None:
             return self._scipy(K, Nc, d)
-        data = K.data.copy()
+        data = K.data
+        self._saved = (weakref.ref(data), self._touched, data[self._touched])
         for cols, seg, pos, trans, diag in self._plan:
             k = pos.shape[0]
             nhat = Nc.data[Nc.indptr[cols][:, None] + np.arange(k)]  # (m, k) unit normals
@@ -250,6 +262,15 @@ class PatternProject:
         out.has_sorted_indices = True
         return out
 
+    def restore(self) -> None:
+        """Put back the values of the last projected ``K`` (if it still exists)."""
+        if self._saved is not None:
+            ref, at, values = self._saved
+            data = ref()
+            if data is not None:
+                data[at] = values
+            self._saved = None
+
     def _scipy(self, K: sp.csr_matrix, N: sp.spmatrix, d: float) -> sp.csr_matrix:
         """``K + dK``, ``dK = -P K - K P + N (N^T K N + d I) N^T``, by SciPy products."""
         N = sp.csc_matrix(N)
@@ -259,27 +280,36 @@ class PatternProject:
         return self._add(sp.csr_matrix((K.data.copy(), K.indices, K.indptr), shape=K.shape), dK)
 
 
-def _transpose_positions(K: sp.csr_matrix) -> np.ndarray | None:
-    """``perm`` with ``K.T.data == K.data[perm]`` if ``K``'s pattern is symmetric, else None."""
-    if K.shape[0] != K.shape[1]:
+def _transposes(K: sp.csr_matrix, rows: np.ndarray, pos: np.ndarray) -> np.ndarray | None:
+    """Position in ``K.data`` of the transpose of each entry at ``pos`` (in rows ``rows``,
+    same shape), or None if one has none. Searched among the entries of the rows the
+    entries' columns name, so the cost follows the constrained rows, not all of ``K``."""
+    cols = K.indices[pos].astype(np.int64)
+    J = np.unique(cols)
+    start = K.indptr[J].astype(np.int64)
+    lens = K.indptr[J + 1].astype(np.int64) - start
+    ptr = np.zeros(len(J) + 1, dtype=np.int64)
+    np.cumsum(lens, out=ptr[1:])
+    src = np.arange(ptr[-1], dtype=np.int64) - np.repeat(ptr[:-1] - start, lens)
+    n = np.int64(K.shape[1])
+    keys = np.repeat(J, lens) * n + K.indices[src]  # ascending: rows J, sorted columns
+    want = cols * n + rows
+    at = np.minimum(np.searchsorted(keys, want), len(keys) - 1)
+    if not np.array_equal(keys[at], want):
         return None
-    numbered = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=np.float64), K.indices, K.indptr),
-                             shape=K.shape)
-    T = numbered.T.tocsr()
-    T.sort_indices()
-    if not (np.array_equal(T.indptr, K.indptr) and np.array_equal(T.indices, K.indices)):
-        return None
-    itype = np.int32 if K.nnz < 2**31 - 1 else np.int64
-    return (T.data - 1).astype(itype)
+    return src[at]
 
 
-def _projection_plan(K: sp.csr_matrix, Nc: sp.csc_matrix,
-                     perm: np.ndarray) -> list[tuple[np.ndarray, ...]] | None:
+def _projection_plan(K: sp.csr_matrix, Nc: sp.csc_matrix, column_counts: np.ndarray
+                     ) -> list[tuple[np.ndarray, ...]] | None:
     """Per group of constraints on ``k`` DOFs: the constraints ``cols``, and over the
     concatenated rows of their DOFs the constraint of each entry ``seg`` (T,), the entries'
     positions ``pos`` (k, T) (row ``a`` of the node), their transposes ``trans`` (k, T) and
-    the node's diagonal block ``diag`` (k, k, m). None if a node's rows differ in pattern or
-    lack a diagonal-block entry."""
+    the node's diagonal block ``diag`` (k, k, m). None if a node's rows differ in pattern,
+    lack a diagonal-block entry, or a constrained DOF's column is not the transpose of its
+    row (``column_counts``: the entries of each column of ``K``)."""
+    if K.shape[0] != K.shape[1]:
+        return None
     counts = np.diff(Nc.indptr)
     plan = []
     for k in np.unique(counts[counts > 0]):
@@ -287,7 +317,7 @@ def _projection_plan(K: sp.csr_matrix, Nc: sp.csc_matrix,
         R = Nc.indices[Nc.indptr[cols][:, None] + np.arange(k)]  # (m, k) DOFs of each node
         start = K.indptr[R].astype(np.int64)
         lens = K.indptr[R + 1].astype(np.int64) - start
-        if not np.all(lens == lens[:, :1]):
+        if not (np.all(lens == lens[:, :1]) and np.array_equal(column_counts[R], lens)):
             return None
         L = lens[:, 0]
         ptr = np.zeros(len(cols) + 1, dtype=np.int64)
@@ -304,5 +334,8 @@ def _projection_plan(K: sp.csr_matrix, Nc: sp.csc_matrix,
                 return None
             for a in range(k):
                 diag[a, b] = pos[a, hit]
-        plan.append((cols, seg, pos, perm[pos].astype(np.int64), diag))
+        trans = _transposes(K, R[seg].T.astype(np.int64), pos)
+        if trans is None:
+            return None
+        plan.append((cols, seg, pos, trans, diag))
     return plan
