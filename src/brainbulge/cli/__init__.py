@@ -25,6 +25,7 @@ from typing import Any
 
 from brainbulge import __version__
 from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.runtime import STOP_SIGNALS
 from brainbulge.runtime import configure as configure_runtime
 
 log = logging.getLogger("brainbulge")
@@ -37,16 +38,12 @@ _NO_WRITE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG)
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (e.g. a batch system's time limit) or SIGHUP (the terminal or SSH connection
-    closed): handled as an interruption."""
+    """One of `STOP_SIGNALS` (a batch system's time limit or its warning before it, a closed
+    terminal or SSH connection): handled as an interruption."""
 
     def __init__(self, signum: int = signal.SIGTERM) -> None:
         super().__init__(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
-
-
-#: signals that stop a command as Ctrl-C does (status written, children ended)
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
 
 class _QuietStream:
