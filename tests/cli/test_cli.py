@@ -144,7 +144,7 @@ BAD = [
     (["study", "hemidisk-sector", "--alphas", "20", "--out", "{study}"], "16 scenarios, not 8"),
     # run files are closed: a misspelt table or option is named, never ignored
     (["run", "{toml:alpah = 70.0}"], "unknown option alpah in [hemidisk]; did you mean 'alpha'"),
-    (["run", "{toml:alpha = 70.0\n[caes]}"], "unknown table [caes]; did you mean 'case'?"),
+    (["run", "{toml:alpha = 70.0\n[caes]}"], "unknown table [caes]; did you mean [case]?"),
     (["run", "{brain_toml:flaps = 'left'}"], "did you mean 'flap'?"),
     # checked before --out is claimed, however cheap or costly the check
     (["study", "hemidisk-sector", "--alphas", "20", "20"], "repeats a value"),

@@ -94,10 +94,11 @@ SERIAL = "serial"
 #: Scenario names: start with a letter or digit, then letters, digits, ``_``, ``-``, ``.``.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
 
-#: Names that would collide with files the runner or the run record write into ``out_dir``.
-RESERVED_NAMES = frozenset(
-    {"study.json", "run.json", "run.toml", "status.json", "summary.json", "error.json"}
-)
+#: Names ending so (ignoring case) would collide with files the runner, the run record, the
+#: log and the study's reports write into ``out_dir`` (``study.json``, ``run.toml``,
+#: ``brainbulge.log``, ``report.md``, ``report.html``, ``table.csv``, its figures, ...).
+RESERVED_SUFFIXES = (".json", ".toml", ".log", ".md", ".html", ".csv", ".png", ".npz", ".vtu",
+                     ".pvd", ".xdmf", ".h5")
 
 CONNECT_TIMEOUT = "10s"  #: how long to try to reach an existing Dask scheduler
 
@@ -123,7 +124,11 @@ def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
         name = scenario.get("name")
         if not isinstance(name, str) or not name:
             raise InputError(f"scenario #{i} has no 'name'; give every scenario a unique name")
-        if not NAME_PATTERN.fullmatch(name) or name.lower() in RESERVED_NAMES:
+        if name.lower().endswith(RESERVED_SUFFIXES):
+            raise InputError(
+                f"scenario name {name!r} is reserved: names ending in "
+                f"{', '.join(RESERVED_SUFFIXES)} are the study's own files; choose another name")
+        if not NAME_PATTERN.fullmatch(name):
             raise InputError(
                 f"scenario name {name!r} is not allowed; use up to 100 letters, digits, '_', "
                 "'-' or '.', starting with a letter or digit"

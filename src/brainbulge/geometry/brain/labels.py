@@ -141,10 +141,12 @@ def read_label_map(label_map: str | Path | dict[str, list[int]]) -> dict[str, li
                 'give a preset name or a JSON file {"gray": [codes], ...}'
             )
         try:
-            mapping = json.loads(path.read_text())
-        except (OSError, ValueError) as err:
+            mapping = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (OSError, ValueError, RecursionError) as err:
+            why = "nested too deeply" if isinstance(err, RecursionError) else " ".join(
+                str(err).split())
             raise InputError(
-                f'cannot read label map {path}: {err}; write it as JSON {{"gray": [3, 42], ...}}'
+                f'cannot read label map {path}: {why}; write it as JSON {{"gray": [3, 42], ...}}'
             ) from None
     if not isinstance(mapping, dict):
         raise InputError('label map must be a JSON object {"gray": [codes], ...}')
@@ -156,10 +158,14 @@ def read_label_map(label_map: str | Path | dict[str, list[int]]) -> dict[str, li
     for name in ("gray", "white"):
         if not mapping.get(name):
             raise InputError(f"label map gives no codes for {name!r}: add its label codes")
-    try:
-        codes = {name: [int(c) for c in codes] for name, codes in mapping.items()}
-    except (TypeError, ValueError):
-        raise InputError('label map codes must be integers, e.g. {"gray": [3, 42]}') from None
+    for name, values in mapping.items():
+        whole = isinstance(values, list) and all(
+            isinstance(c, int | float) and not isinstance(c, bool) and float(c).is_integer()
+            and abs(c) < 2**31 for c in values)
+        if not whole:
+            raise InputError(f"label map codes of {name!r} must be a list of whole numbers, got "
+                             f"{json.dumps(values)[:60]}; write e.g. {{\"gray\": [3, 42]}}")
+    codes = {name: [int(c) for c in values] for name, values in mapping.items()}
     owner: dict[int, str] = {}
     for name, values in codes.items():
         for code in values:
