@@ -21,6 +21,7 @@ import brainbulge.studies.craniectomy as cr
 import brainbulge.studies.hemidisk as hd
 from brainbulge.atomic import atomic_output
 from brainbulge.cli import checks, main
+from brainbulge.errors import InputError
 from brainbulge.results.records.output_folder import claim_output_dir, read_manifest
 
 FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
@@ -420,9 +421,29 @@ def test_the_help_defaults_are_accepted_as_written(capsys) -> None:
 
     with pytest.raises(SystemExit):
         build_parser().parse_args(["mesh", "--help"])
-    assert "(default 1e5)" in capsys.readouterr().out
+    assert "(default 1e5;" in capsys.readouterr().out
     args = build_parser().parse_args(["mesh", "--tets", "1e5"])
     assert args.tets == 100_000 and isinstance(args.tets, int)
+
+
+@pytest.mark.parametrize("command", ["brain", "mesh"])
+def test_the_help_states_the_least_tets_that_is_enforced(capsys, command) -> None:
+    import re
+
+    from brainbulge.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    least = int(re.search(r"ICBM152 template at least (\d+) x 8\^K", text)[1])
+    per_ml = float(re.search(r"--labels image at least ([\d.]+) per ml", text)[1])
+    checks.mesh_tets(least, 0, template=True)
+    checks.mesh_tets(least * 8, 1, template=True)
+    with pytest.raises(InputError, match=f"below {least:,}"):
+        checks.mesh_tets(least - 1, 0, template=True)
+    with pytest.raises(InputError, match="too coarse"):
+        checks.mesh_tets(int(per_ml * 1000 * 0.98), 0, template=False, labelled_ml=1000.0)
+    checks.mesh_tets(int(per_ml * 1000 * 1.02), 0, template=False, labelled_ml=1000.0)
 
 
 def test_an_over_long_out_is_refused_in_one_line(tmp_path, capsys) -> None:

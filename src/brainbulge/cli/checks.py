@@ -18,22 +18,11 @@ from pathlib import Path
 from typing import Any, Union
 
 from brainbulge.errors import InputError
-from brainbulge.model.brain_case import TETS_RANGE
+from brainbulge.model.brain_case import LABELS_TETS_PER_ML, TEMPLATE_TETS_MIN, TETS_RANGE
 from brainbulge.model.options import number
 
 log = logging.getLogger(__name__)
 
-#: the coarsest mesh Netgen makes of the ICBM152 template: below ~25,000 target tets it
-#: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
-#: finish in 5 minutes)
-TEMPLATE_TETS_MIN = 25_000
-#: the template's labelled volume [ml] (all tissues of ``icbm152_tissue_image``)
-TEMPLATE_LABELLED_ML = 1883.0
-#: a user's segmentation (``--labels``): target tets per ml of labelled tissue before
-#: refinement. Netgen's trouble depends on the element size in mm against a brain's mm-scale
-#: surface, so the template's densities carry over: below 10,000 tets (5.3 per ml) it gave up
-#: on the template, from 25,000 (13.3 per ml) it meshes; in between a warning.
-LABELS_TETS_PER_ML = (10_000 / TEMPLATE_LABELLED_ML, TEMPLATE_TETS_MIN / TEMPLATE_LABELLED_ML)
 #: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
 FLAP_CENTRE_MM = 150.0
 #: local Dask worker processes (``--workers``)
