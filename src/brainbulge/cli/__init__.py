@@ -172,7 +172,8 @@ def _os_message(err: OSError) -> str:
     """One line for a failed write: what, why, what to do."""
     out = _RUN.folder.path if _RUN.folder is not None else None
     inside = out is not None and err.filename is not None and (
-        Path(out).resolve() in Path(str(err.filename)).resolve().parents)
+        Path(out).resolve() in (target := Path(str(err.filename)).resolve()).parents
+        or Path(out).resolve() == target)
     what = (f"cannot write {err.filename}" if inside else f"cannot access {err.filename}"
             if err.filename else "cannot write the results")
     why = (err.strerror or str(err)).rstrip(".").lower()
@@ -181,7 +182,8 @@ def _os_message(err: OSError) -> str:
         return f"{what}: {why}; free some space or choose another --out{kept}"
     if err.errno == errno.ENAMETOOLONG:
         return f"{what}: {why}; choose a shorter --out (or shorter scenario names)"
-    return f"{what}: {why}; " + ("choose a writable --out" if inside or not err.filename
+    writing = inside or not err.filename or err.errno == errno.EROFS
+    return f"{what}: {why}; " + ("choose a writable --out" if writing
                                  else "check that the file is readable")
 
 

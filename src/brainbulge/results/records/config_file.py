@@ -17,6 +17,7 @@ from datetime import date, datetime, time
 from pathlib import Path, PurePath
 from typing import Any
 
+from brainbulge.atomic import read_regular
 from brainbulge.errors import InputError
 
 
@@ -60,7 +61,7 @@ def load_config(path: Path) -> dict[str, Any]:
     syntax error) if it is missing, unreadable or not valid TOML."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_regular(path, follow_links=True)  # a FIFO or a device: refused, not read
     except OSError as exc:
         raise InputError(f"cannot read config {path}: {exc.strerror or exc}") from exc
     try:

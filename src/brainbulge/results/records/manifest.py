@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from brainbulge.atomic import JOURNAL
+from brainbulge.atomic import JOURNAL, read_regular
 from brainbulge.errors import InputError
 
 #: The lock file of a folder in use (not part of any manifest).
@@ -70,8 +70,8 @@ def read_manifest(path: Path) -> Manifest | None:
     without signatures."""
     path = Path(path)
     try:
-        record = json.loads((path / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        record = json.loads(read_regular(path / "run.json").decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
         record = None
     files = record.get(MANIFEST_KEY) if isinstance(record, dict) else None
     manifest: Manifest | None = None
@@ -98,7 +98,7 @@ def read_journal(path: Path) -> Manifest:
     """The files the journal of ``path`` lists (the last entry of each); {} if none."""
     found: Manifest = {}
     try:
-        lines = (Path(path) / JOURNAL).read_text(encoding="utf-8").splitlines()
+        lines = read_regular(Path(path) / JOURNAL).decode("utf-8").splitlines()
     except (OSError, UnicodeDecodeError):
         return found
     for line in lines:

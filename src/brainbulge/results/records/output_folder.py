@@ -35,12 +35,13 @@ import logging
 import os
 import shutil
 import socket
+import stat
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from brainbulge.atomic import JOURNAL
+from brainbulge.atomic import JOURNAL, read_regular
 from brainbulge.errors import InputError
 from brainbulge.results.records.manifest import (
     ASIDE,
@@ -113,6 +114,9 @@ def check_out_path(path: Path | str, overwrite: bool) -> Path:
         raise InputError(f"--out is {full} characters long as a full path; the results need "
                          f"{NAME_ROOM} more, and the file system allows {path_max}: choose a "
                          "shorter --out")
+    if path.is_symlink() and not path.exists():
+        raise InputError(f"--out {path} is a symbolic link to nothing (its target is missing, "
+                         "or the link loops); remove the link or choose another --out")
     if path.exists() and not path.is_dir():
         raise InputError(f"output folder {path} exists and is a file; choose another --out")
     if overwrite and path.exists():
@@ -217,6 +221,7 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
                 f"cannot resume: output folder {path} is not empty and holds no study.json"
                 " or restart.npz; choose another --out"
             )
+        _check_foreign_entries(path)
         _check_same_run(path, config)
         return "resume"
     if not overwrite:
@@ -248,6 +253,28 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
     return "clear"
 
 
+def _check_foreign_entries(path: Path) -> None:
+    """Refuse (`InputError`) a folder to resume in that holds a symbolic link, a FIFO, a
+    device or a socket anywhere: brainbulge writes none, and going on would read, write or
+    delete through it (outside the folder) or wait on it for good."""
+    for dirpath, dirnames, filenames in os.walk(path, followlinks=False):
+        here = Path(dirpath)
+        for name in (*dirnames, *filenames):
+            entry = here / name
+            try:
+                mode = entry.lstat().st_mode
+            except OSError:
+                continue
+            kind = ("a symbolic link" if stat.S_ISLNK(mode) else None if stat.S_ISREG(mode)
+                    or stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                    else "a socket" if stat.S_ISSOCK(mode) else "a device file")
+            if kind is not None:
+                raise InputError(
+                    f"cannot resume in {path}: {entry} is {kind}, which brainbulge never "
+                    "writes (resuming would go through it); move it away and rerun, or "
+                    "choose another --out")
+
+
 # --------------------------------------------------------------------------- the lock
 
 
@@ -272,8 +299,8 @@ def _pid_alive(pid: int, since: float) -> bool:
 
 def _read_lock(lock: Path) -> dict[str, Any] | None:
     try:
-        data = json.loads(lock.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = json.loads(read_regular(lock).decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
 
@@ -372,8 +399,8 @@ class OutputFolder:
 
         run_json = self.path / "run.json"
         try:
-            record = json.loads(run_json.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            record = json.loads(read_regular(run_json).decode("utf-8"))
+        except (OSError, ValueError, RecursionError):
             return
         record[MANIFEST_KEY] = {f: None if sig is None else list(sig)
                                 for f, sig in sorted(self.manifest().items())}

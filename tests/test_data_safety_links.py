@@ -1,0 +1,195 @@
+"""Nothing outside ``--out`` is touched and nothing waits for good: links, FIFOs and devices
+where brainbulge expects its own files and folders, ``--out`` links to nothing, a read-only
+``--out``.
+
+The studies here run their scenarios in this process with a stand-in task (the folder, its
+record, its checks and the runner are real); each test takes about a second.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import json
+import os
+import signal
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import brainbulge.studies.hemidisk as hd
+import brainbulge.studies.suites as suites
+from brainbulge.atomic import atomic_output
+from brainbulge.cli import main
+from brainbulge.studies.runner import _read_json, _readable, run_study
+
+STUDY = ["study", "hemidisk-sector", "--alphas", "20", "--betas", "30"]
+SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
+           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0}
+
+
+def one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    return err[0]
+
+
+@contextlib.contextmanager
+def deadline(seconds: int) -> Iterator[None]:
+    """Fail (TimeoutError) instead of hanging the tests if the block waits for good."""
+
+    def expired(signum, frame):
+        raise TimeoutError(f"still waiting after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def tree(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def small_task(scenario: dict, scenario_dir: str) -> dict:
+    with atomic_output(Path(scenario_dir) / "fields.npz") as tmp:
+        np.savez(tmp, x=np.arange(10.0))
+    return {"x": 1.0}
+
+
+def in_process_study(name, scenarios, out, scheduler, workers=None) -> int:
+    rows = run_study(scenarios, small_task, out, scheduler="serial", progress=False,
+                     outputs=("fields.npz",))
+    return sum(1 for r in rows if r["complete"])
+
+
+@pytest.fixture
+def study(tmp_path, monkeypatch) -> Path:
+    """A finished study folder (two scenarios), and a folder of someone else's next to it."""
+    monkeypatch.setattr(suites, "run_named_study", in_process_study)
+    out = tmp_path / "study"
+    assert main([*STUDY, "--out", str(out)]) == 0
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "summary.json").write_text('{"theirs": true}')
+    (elsewhere / "error.json").write_text('{"theirs": true}')
+    (elsewhere / "notes.log").write_text("their log\n")
+    return out
+
+
+def _scenario(out: Path) -> Path:
+    return next(p for p in sorted(out.iterdir()) if p.is_dir())
+
+
+def _link_scenario(out: Path) -> Path:
+    folder = _scenario(out)
+    for f in folder.iterdir():
+        f.unlink()
+    folder.rmdir()
+    folder.symlink_to(out.parent / "elsewhere", target_is_directory=True)
+    return folder
+
+
+def _link_log(out: Path) -> Path:
+    (out / "brainbulge.log").unlink()
+    (out / "brainbulge.log").symlink_to(out.parent / "elsewhere" / "notes.log")
+    return out / "brainbulge.log"
+
+
+def _fifo_fields(out: Path) -> Path:
+    fields = _scenario(out) / "fields.npz"
+    fields.unlink()
+    os.mkfifo(fields)
+    return fields
+
+
+def _device_fields(out: Path) -> Path:
+    fields = _scenario(out) / "fields.npz"
+    fields.unlink()
+    fields.symlink_to("/dev/zero")
+    return fields
+
+
+def _fifo_journal(out: Path) -> Path:
+    os.mkfifo(out / ".brainbulge.journal")
+    return out / ".brainbulge.journal"
+
+
+@pytest.mark.parametrize("plant,kind", [
+    (_link_scenario, "a symbolic link"), (_link_log, "a symbolic link"),
+    (_fifo_fields, "a FIFO"), (_device_fields, "a symbolic link"),
+    (_fifo_journal, "a FIFO"),
+], ids=["scenario folder -> elsewhere", "log -> elsewhere", "fields.npz FIFO",
+        "fields.npz -> /dev/zero", "journal FIFO"])
+def test_resume_never_goes_through_a_link_nor_waits_on_a_fifo(study, capsys, plant, kind
+                                                             ) -> None:
+    elsewhere = study.parent / "elsewhere"
+    before = tree(elsewhere)
+    planted = plant(study)
+    capsys.readouterr()
+    with deadline(30):  # a run that waits on the FIFO fails here instead of hanging
+        started = time.monotonic()
+        code = main([*STUDY, "--out", str(study)])
+        took = time.monotonic() - started
+    line = one_line(capsys)
+    assert code == 2 and took < 10
+    assert f"cannot resume in {study}: {planted} is {kind}" in line and "move it away" in line
+    assert tree(elsewhere) == before  # nothing outside --out created, changed or deleted
+    assert not (study / ".brainbulge.lock").exists()
+    assert json.loads((study / "status.json").read_text())["status"] == "complete"
+    planted.unlink()  # moved away as the line says: the rerun resumes
+    if plant is _link_scenario:
+        planted.mkdir()
+    assert main([*STUDY, "--out", str(study)]) == 0
+    assert tree(elsewhere) == before
+
+
+def test_files_in_the_runner_are_read_only_when_regular(tmp_path) -> None:
+    """Resume through the Python API (no claimed folder): a FIFO, a link to a device and a
+    link to a good file are not results, read at once."""
+    good = tmp_path / "good.npz"
+    np.savez(good, x=np.arange(3.0))
+    os.mkfifo(tmp_path / "fifo.npz")
+    (tmp_path / "zero.npz").symlink_to("/dev/zero")
+    (tmp_path / "link.npz").symlink_to(good)
+    (tmp_path / "link.json").symlink_to(tmp_path / "elsewhere.json")
+    (tmp_path / "elsewhere.json").write_text('{"theirs": true}')
+    os.mkfifo(tmp_path / "fifo.json")
+    with deadline(10):
+        assert _readable(good)
+        for name in ("fifo.npz", "zero.npz", "link.npz", "fifo.json"):
+            assert not _readable(tmp_path / name), name
+        assert _read_json(tmp_path / "link.json") is None
+        assert _read_json(tmp_path / "fifo.json") is None
+
+
+@pytest.mark.parametrize("target", ["missing", "loop"])
+def test_an_out_that_links_to_nothing_is_named(tmp_path, capsys, target) -> None:
+    out = tmp_path / "out"
+    out.symlink_to(tmp_path / "missing" if target == "missing" else out)
+    assert main(["hemidisk", "--out", str(out)]) == 2
+    assert f"--out {out} is a symbolic link to nothing" in one_line(capsys)
+    assert out.is_symlink() and not (tmp_path / "missing").exists()
+
+
+@pytest.mark.parametrize("code,where", [(errno.EACCES, "out"), (errno.EROFS, "out"),
+                                        (errno.EROFS, "tmp")])
+def test_a_read_only_out_is_told_to_choose_a_writable_out(tmp_path, monkeypatch, capsys,
+                                                          code, where) -> None:
+    out = tmp_path / "out"
+
+    def refused(case, folder, progress=False):  # the folder itself, or a temporary file
+        name = str(folder) if where == "out" else "/tmp/tmpXYZ"
+        raise OSError(code, os.strerror(code), name)
+
+    monkeypatch.setattr(hd, "run_hemidisk", refused)
+    assert main(["hemidisk", "--mesh-size", "0.3", "--steps", "1", "--out", str(out)]) == 2
+    line = one_line(capsys)
+    assert "choose a writable --out" in line and "readable" not in line
