@@ -17,7 +17,7 @@ import typing
 from pathlib import Path
 from typing import Any, Union
 
-from brainbulge.errors import InputError
+from brainbulge.errors import BrainbulgeError, InputError
 from brainbulge.model.brain_case import LABELS_TETS_PER_ML, TEMPLATE_TETS_MIN, TETS_RANGE
 from brainbulge.model.options import number
 
@@ -122,7 +122,9 @@ def brain_npz(path: str | Path, what: str = "--mesh") -> None:
     if key in _READABLE:  # a study's scenarios share one mesh
         return
     try:
-        load_brain_mesh(p)
+        load_brain_mesh(p)  # every array checked (index range, NaN, codes, volumes)
+    except BrainbulgeError:
+        raise
     except Exception:  # noqa: BLE001 - truncated, foreign, text: all the same to the user
         raise InputError(f"{what} {path} is not a brain.npz written by `brainbulge mesh` "
                          "(unreadable or other arrays); build one with `brainbulge mesh "
