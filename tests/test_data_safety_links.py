@@ -14,6 +14,7 @@ import json
 import os
 import signal
 import time
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -193,3 +194,61 @@ def test_a_read_only_out_is_told_to_choose_a_writable_out(tmp_path, monkeypatch,
     assert main(["hemidisk", "--mesh-size", "0.3", "--steps", "1", "--out", str(out)]) == 2
     line = one_line(capsys)
     assert "choose a writable --out" in line and "readable" not in line
+
+
+# --------------------------------------------------------------------------- reports
+
+HOSTILE = ('<script>alert(1)</script> <img src=x onerror=alert(2)> '
+           '<a href="javascript:alert(3)">x</a> <!-- brainbulge-3d-plan -->')
+
+
+def _elements(page: str) -> Counter:
+    """How many elements of each tag the page has (what a browser would build)."""
+    from html.parser import HTMLParser
+
+    found: Counter = Counter()
+
+    class Tags(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            found[tag] += 1
+
+    Tags().feed(page)
+    return found
+
+
+def _report(folder: Path, text: str) -> str:
+    from brainbulge.results.present.html_report import block_marker, markdown_html
+
+    folder.mkdir()
+    md = folder / "report.md"
+    md.write_text("\n".join([
+        f"# Study in {text}", "", f"A note: {text}", "", f"- {text}", "",
+        "| scenario | note |", "|---|---|", f"| a | {text} |", "",
+        f"[{text}](table.csv)", "", block_marker("plan"), ""]))
+    return markdown_html(md, {"plan": "<div class=\"ours\">our block</div>"})
+
+
+def test_a_report_renders_user_text_as_text(tmp_path) -> None:
+    """Headings, paragraphs, lists, table cells and link texts of a report, each holding
+    tags and a marker: the page has exactly the elements of the same report with plain text,
+    and our own block is still put in."""
+    clean = _report(tmp_path / "clean", "plain words")
+    hostile = _report(tmp_path / "hostile", HOSTILE)
+    assert _elements(hostile) == _elements(clean)
+    assert "&lt;script&gt;" in hostile and hostile.count('<div class="ours">') == 1
+
+
+def test_a_study_report_escapes_error_messages(tmp_path) -> None:
+    """A craniectomy study whose scenarios failed with messages holding tags (an error text
+    quotes a path or a value the user gave)."""
+    from brainbulge.results.present.craniectomy_report import write_report
+
+    pages = {}
+    for kind, error in (("clean", "plain words"), ("hostile", HOSTILE)):
+        out = tmp_path / kind
+        out.mkdir()
+        write_report(out, [{"name": "left_flap"}, {"name": "frontal"}],
+                     [{"complete": False, "error": f"{error} in {out}"}] * 2)
+        pages[kind] = (out / "report.html").read_text()
+    assert _elements(pages["hostile"]) == _elements(pages["clean"])
+    assert "alert(1)" in pages["hostile"] and "<script>alert" not in pages["hostile"]
