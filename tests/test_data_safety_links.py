@@ -252,3 +252,55 @@ def test_a_study_report_escapes_error_messages(tmp_path) -> None:
         pages[kind] = (out / "report.html").read_text()
     assert _elements(pages["hostile"]) == _elements(pages["clean"])
     assert "alert(1)" in pages["hostile"] and "<script>alert" not in pages["hostile"]
+
+
+# --------------------------------------------------------------------------- schedulers
+
+
+def test_a_scheduler_without_workers_is_said_at_once_and_refused_after_the_wait(
+        tmp_path, monkeypatch, caplog, capsys) -> None:
+    import subprocess
+    import sys
+
+    from distributed import LocalCluster
+
+    from brainbulge.cli import checks
+    from brainbulge.errors import InputError
+
+    monkeypatch.setattr(checks, "SCHEDULER_PROBE_S", 1.0)
+    monkeypatch.setattr(checks, "WORKER_POLL_S", 0.2)
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://",
+                      dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        started = time.monotonic()
+        with pytest.raises(InputError, match="no workers joined it in 2 s; start workers"):
+            checks.scheduler(address, worker_wait=2.0)
+        assert time.monotonic() - started < 2.0 + 2 * checks.SCHEDULER_PROBE_S + 1.0
+        assert f"no workers at {address}; waiting up to 2 s" in caplog.text
+        out = tmp_path / "out"
+        assert main([*STUDY, "--scheduler", address, "--worker-wait", "1",
+                     "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert "no workers joined it in 1 s" in err[-1] and not out.exists()
+        caplog.clear()
+        worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker",
+                                   address, "--nthreads", "1", "--no-dashboard"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            checks.scheduler(address, worker_wait=120.0)  # returns once the worker joined
+        finally:
+            worker.terminate()
+            worker.wait(30)
+        assert "a worker joined" in caplog.text
+
+
+def test_the_worker_wait_is_an_option_with_a_range(capsys) -> None:
+    from brainbulge.cli import build_parser, checks
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["study", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert (f"(default {checks.WORKER_WAIT_S:g}; range [{checks.WORKER_WAIT_RANGE[0]:g}, "
+            f"{checks.WORKER_WAIT_RANGE[1]:g}])") in text
+    assert main([*STUDY, "--worker-wait", "-1", "--out", "x"]) == 2
+    assert "--worker-wait" in one_line(capsys)

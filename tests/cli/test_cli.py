@@ -301,7 +301,7 @@ def test_a_dask_scheduler_passes_the_probe_and_another_server_does_not(monkeypat
     from brainbulge.errors import InputError
 
     monkeypatch.setattr(checks, "SCHEDULER_PROBE_S", 1.0)
-    with LocalCluster(n_workers=0, processes=False, protocol="tcp://",
+    with LocalCluster(n_workers=1, processes=False, protocol="tcp://",
                       dashboard_address=":0") as cluster:
         address = cluster.scheduler_address
         checks.scheduler(address)

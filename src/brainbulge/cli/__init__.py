@@ -388,7 +388,8 @@ def add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
 
 def add_cluster_options(p: argparse.ArgumentParser, what: str = "",
                         workers_note: str = "") -> None:
-    """``--scheduler`` and ``--workers`` (checked by :func:`brainbulge.cli.checks.cluster`);
+    """``--scheduler``, ``--workers`` and ``--worker-wait`` (checked by
+    :func:`brainbulge.cli.checks.cluster`);
     ``what``: the runs they apply to, as a prefix of the help."""
     prefix = f"{what}: " if what else ""
     p.add_argument("--scheduler", default=None,
@@ -396,6 +397,12 @@ def add_cluster_options(p: argparse.ArgumentParser, what: str = "",
                    "cluster); 'serial' runs in this process")
     p.add_argument("--workers", type=whole_number("--workers"), default=None,
                    help=f"{prefix}local worker processes{workers_note}")
+    from brainbulge.cli.checks import WORKER_WAIT_RANGE, WORKER_WAIT_S
+
+    p.add_argument("--worker-wait", type=float, default=WORKER_WAIT_S, metavar="S",
+                   help=f"{prefix}seconds to wait for a worker of a --scheduler that has none "
+                   f"before giving up (default {WORKER_WAIT_S:g}; range "
+                   f"[{WORKER_WAIT_RANGE[0]:g}, {WORKER_WAIT_RANGE[1]:g}])")
 
 
 def require(cond: bool, message: str) -> None:

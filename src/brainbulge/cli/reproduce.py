@@ -54,7 +54,7 @@ def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
     from brainbulge.cli import checks
     from brainbulge.studies.suites import paper_parts
 
-    checks.cluster(args.scheduler, getattr(args, "workers", None))
+    checks.cluster(args.scheduler, getattr(args, "workers", None), args.worker_wait)
     return paper_parts(args.tets, args.fix, args.mesh_size)
 
 

@@ -216,8 +216,10 @@ def load_brain_mesh(path: str | Path) -> BrainMesh:
 
     try:
         d = np.load(path)
-    except (OSError, ValueError) as err:
-        raise InputError(f"cannot read brain mesh {path}: {err}; give a brain.npz") from None
+    except (OSError, ValueError):
+        raise InputError(f"brain mesh {path} is not a brain.npz written by `brainbulge mesh` "
+                         "(unreadable, or not an .npz of arrays); build one with `brainbulge "
+                         "mesh --out DIR` and pass DIR/brain.npz") from None
     check_mesh_arrays(d, path)
     mesh = BrainMesh(
         d["nodes_mm"], d["tets"], d["tissue"], d["side"], d["faces"], d["face_tet"],
