@@ -304,3 +304,22 @@ def test_the_worker_wait_is_an_option_with_a_range(capsys) -> None:
             f"{checks.WORKER_WAIT_RANGE[1]:g}])") in text
     assert main([*STUDY, "--worker-wait", "-1", "--out", "x"]) == 2
     assert "--worker-wait" in one_line(capsys)
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["mesh", "--labels", "{fifo}"], "label image {fifo} is not a regular file"),
+    (["brain", "--labels", "{fifo}"], "label image {fifo} is not a regular file"),
+    (["brain", "--fibres", "{fifo}"], "fibre image {fifo} does not exist or is not a regular"),
+    (["mesh", "--labels", "/dev/zero"], "label image /dev/zero is not a regular file"),
+    (["run", "{fifo}"], "cannot read config {fifo}: not a regular file"),
+    (["brain", "--mesh", "{fifo}"], "no such file"),
+])
+def test_an_input_that_is_not_a_regular_file_is_refused_at_once(tmp_path, capsys, argv, words
+                                                                ) -> None:
+    fifo = tmp_path / "input.fifo"
+    os.mkfifo(fifo)
+    out = tmp_path / "out"
+    with deadline(20):
+        assert main([*(a.replace("{fifo}", str(fifo)) for a in argv), "--out", str(out)]) == 2
+    assert words.replace("{fifo}", str(fifo)) in one_line(capsys)
+    assert not out.exists()

@@ -238,7 +238,8 @@ class CraniectomyCase:
                              "refined one with `brainbulge mesh --refine` and pass that")
         self._check_sequencing()
         if self.fibres is not None and not Path(self.fibres).is_file():
-            raise InputError(f"fibre image {self.fibres} does not exist")
+            raise InputError(f"fibre image {self.fibres} does not exist or is not a regular "
+                             "file; give a NIfTI file (.nii/.nii.gz) of shape (nx, ny, nz, 3)")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
 

@@ -52,8 +52,9 @@ def read_fibres(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     not finite and invertible. Zero vectors are allowed (no direction there)."""
     import nibabel as nib
 
-    from brainbulge.geometry.brain.labels import check_declared_size
+    from brainbulge.geometry.brain.labels import check_declared_size, check_regular_file
 
+    check_regular_file(path, "fibre image")
     try:
         img = nib.load(str(path))
     except Exception as err:  # noqa: BLE001 - nibabel raises several types

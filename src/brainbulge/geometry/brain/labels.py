@@ -77,6 +77,21 @@ def available_memory_bytes() -> int | None:
         return None
 
 
+def check_regular_file(path: str | Path, what: str) -> None:
+    """Refuse (`InputError`) an input image that is not a regular file (a FIFO, a device, a
+    folder: reading one could wait for good); a link to a regular file is fine."""
+    import stat
+
+    try:
+        mode = Path(path).stat().st_mode
+    except OSError as err:
+        raise InputError(f"cannot read {what} {path}: {err.strerror or err}; give a NIfTI "
+                         "file (.nii/.nii.gz)") from None
+    if not stat.S_ISREG(mode):
+        raise InputError(f"{what} {path} is not a regular file (a FIFO, a device or a "
+                         "folder); give a NIfTI file (.nii/.nii.gz)")
+
+
 def check_declared_size(img: object, path: str | Path, what: str,
                         work_bytes_per_voxel: int = WORK_BYTES_PER_VOXEL) -> None:
     """Refuse (`InputError`) a NIfTI image whose header declares more voxels than the memory
@@ -225,6 +240,7 @@ def load_tissue_image(
     """Read a NIfTI label image (``.nii``/``.nii.gz``) and map it to tissues (see module doc)."""
     import nibabel as nib
 
+    check_regular_file(path, "label image")
     try:
         img = nib.load(str(path))
     except Exception as err:  # nibabel raises many types for unreadable files
