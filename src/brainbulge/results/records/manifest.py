@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import stat
 import tempfile
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -62,6 +63,28 @@ def folder_files(path: Path) -> dict[str, Signature]:
             found[(here / name).relative_to(root).as_posix()] = (st.st_ino, st.st_size,
                                                                 st.st_mtime_ns)
     return found
+
+
+def check_no_special_entries(path: Path) -> None:
+    """Refuse (`InputError`) a folder to resume in that holds a symbolic link, a FIFO, a
+    device or a socket anywhere: brainbulge writes none, and going on would read, write or
+    delete through it (outside the folder) or wait on it for good."""
+    for dirpath, dirnames, filenames in os.walk(path, followlinks=False):
+        here = Path(dirpath)
+        for name in (*dirnames, *filenames):
+            entry = here / name
+            try:
+                mode = entry.lstat().st_mode
+            except OSError:
+                continue
+            kind = ("a symbolic link" if stat.S_ISLNK(mode) else None if stat.S_ISREG(mode)
+                    or stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                    else "a socket" if stat.S_ISSOCK(mode) else "a device file")
+            if kind is not None:
+                raise InputError(
+                    f"cannot resume in {path}: {entry} is {kind}, which brainbulge never "
+                    "writes (resuming would go through it); move it away and rerun, or "
+                    "choose another --out")
 
 
 def read_manifest(path: Path) -> Manifest | None:

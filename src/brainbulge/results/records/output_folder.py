@@ -35,7 +35,6 @@ import logging
 import os
 import shutil
 import socket
-import stat
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,6 +47,7 @@ from brainbulge.results.records.manifest import (
     LOCK_FILE,
     MANIFEST_KEY,
     Manifest,
+    check_no_special_entries,
     clear_listed,
     config_paths,
     folder_files,
@@ -221,7 +221,7 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
                 f"cannot resume: output folder {path} is not empty and holds no study.json"
                 " or restart.npz; choose another --out"
             )
-        _check_foreign_entries(path)
+        check_no_special_entries(path)
         _check_same_run(path, config)
         return "resume"
     if not overwrite:
@@ -251,28 +251,6 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
             "them away or choose another --out"
         )
     return "clear"
-
-
-def _check_foreign_entries(path: Path) -> None:
-    """Refuse (`InputError`) a folder to resume in that holds a symbolic link, a FIFO, a
-    device or a socket anywhere: brainbulge writes none, and going on would read, write or
-    delete through it (outside the folder) or wait on it for good."""
-    for dirpath, dirnames, filenames in os.walk(path, followlinks=False):
-        here = Path(dirpath)
-        for name in (*dirnames, *filenames):
-            entry = here / name
-            try:
-                mode = entry.lstat().st_mode
-            except OSError:
-                continue
-            kind = ("a symbolic link" if stat.S_ISLNK(mode) else None if stat.S_ISREG(mode)
-                    or stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
-                    else "a socket" if stat.S_ISSOCK(mode) else "a device file")
-            if kind is not None:
-                raise InputError(
-                    f"cannot resume in {path}: {entry} is {kind}, which brainbulge never "
-                    "writes (resuming would go through it); move it away and rerun, or "
-                    "choose another --out")
 
 
 # --------------------------------------------------------------------------- the lock
