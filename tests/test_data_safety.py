@@ -217,7 +217,8 @@ SLOW = ("import subprocess, sys, time\n"
         "sys.exit(main(sys.argv[1:]))\n")
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGUSR1,
+                                    signal.SIGUSR2, signal.SIGXCPU])
 def test_sigterm_ends_child_processes_and_leaves_a_true_status(tmp_path, signum) -> None:
     import psutil
 
@@ -233,7 +234,8 @@ def test_sigterm_ends_child_processes_and_leaves_a_true_status(tmp_path, signum)
             time.sleep(0.1)
         child = int((out / "child.pid").read_text())
         assert psutil.pid_exists(child)
-        run.send_signal(signum)  # SIGHUP: the terminal or SSH session closed
+        run.send_signal(signum)  # SIGHUP: the terminal closed; SIGUSR1/2, SIGXCPU: a batch
+        # system's warning before its time limit (SLURM's --signal, SGE's soft limit)
         _, err = run.communicate(timeout=60)
     finally:
         run.kill()

@@ -21,6 +21,7 @@ import brainbulge.studies.craniectomy as cr
 import brainbulge.studies.hemidisk as hd
 from brainbulge.atomic import atomic_output
 from brainbulge.cli import checks, main
+from brainbulge.errors import InputError
 from brainbulge.results.records.output_folder import claim_output_dir, read_manifest
 
 FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
@@ -201,10 +202,10 @@ def test_a_failed_overwrite_leaves_the_previous_result_intact(tmp_path, monkeypa
 
 
 @pytest.mark.parametrize("text,words", [
-    ("[caes]\nalpha = 70.0\n", "unknown table [caes]; did you mean 'case'?"),
+    ("[caes]\nalpha = 70.0\n", "unknown table [caes]; did you mean [case]?"),
     ("alpha = 70.0\n", "unknown option alpha; it belongs in [case]"),
     ("[case]\nalpah = 70.0\n", "unknown option alpah in [case]; did you mean 'alpha'?"),
-    ("[output]\nformat = 'vtu'\n", "unknown table [output]; valid here:"),
+    ("[output]\nformat = 'vtu'\n", "unknown table [output]; valid tables here:"),
     ("[case]\nalpha = 70.0\n[solver]\nmesh = 0.1\n",
      "unknown option mesh in [solver]; did you mean 'mesh_size'?"),
 ])
@@ -214,6 +215,83 @@ def test_a_run_file_is_closed(tmp_path, capsys, text, words) -> None:
     assert main(["run", str(toml), "--out", str(tmp_path / "out")]) == 2
     assert words in one_line(capsys)
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("text,words", [
+    ("[case.alpah]\nx = 1\n", "unknown table [case.alpah]; [case] holds options only"),
+    ("[cas.alpha]\nx = 1\n", "unknown table [cas]; did you mean [case]?"),
+    ("[solver.extra]\nx = 1\n", "unknown table [solver.extra]; [solver] holds options only"),
+])
+def test_an_unknown_table_is_named_as_a_table(tmp_path, capsys, text, words) -> None:
+    toml = tmp_path / "case.toml"
+    toml.write_text('command = "hemidisk"\n' + text)
+    assert main(["run", str(toml), "--out", str(tmp_path / "out")]) == 2
+    line = one_line(capsys)
+    assert words in line and "did you mean 'alpha'" not in line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("value", ["[" * 100_000 + "]" * 100_000,
+                                   "{a = " * 3000 + "1" + "}" * 3000])
+def test_a_run_file_nested_thousands_deep_is_invalid_toml(tmp_path, capsys, value) -> None:
+    toml = tmp_path / "case.toml"
+    toml.write_text(f'command = "hemidisk"\n[case]\nalpha = {value}\n')
+    assert main(["run", str(toml), "--out", str(tmp_path / "out")]) == 2
+    assert f"invalid TOML in {toml}: tables or lists nested too deeply" in one_line(capsys)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_run_file_with_a_byte_order_mark_is_read(tmp_path, monkeypatch) -> None:
+    seen = []
+    monkeypatch.setattr(hd, "run_hemidisk", lambda case, out, progress=False: (
+        seen.append(case.alpha), SUMMARY)[1])
+    toml = tmp_path / "case.toml"  # as Notepad saves "UTF-8 with BOM"
+    toml.write_bytes(b"\xef\xbb\xbf" + b'command = "hemidisk"\r\n[case]\r\nalpha = 70.0\r\n')
+    assert main(["run", str(toml), "--out", str(tmp_path / "out")]) == 0
+    assert seen == [70.0]
+
+
+@pytest.mark.parametrize("name", ["table.csv", "Report.MD", "brainbulge.log", "report.html",
+                                  "STUDY.JSON", "comparison.png"])
+def test_a_scenario_named_as_a_file_of_the_study_is_refused(tmp_path, capsys, name) -> None:
+    toml = tmp_path / "study.toml"
+    toml.write_text('command = "study"\nstudy = "hemidisk-sector"\n'
+                    f'[[scenarios]]\nname = "{name}"\nalpha = 60.0\n')
+    assert main(["run", str(toml), "--out", str(tmp_path / "out")]) == 2
+    assert f"scenario name {name!r} is reserved" in one_line(capsys)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("codes,words", [
+    ("[2.5]", "must be a list of whole numbers, got [2.5]"),
+    ("[true]", "got [true]"),
+    ('"3"', 'got "3"'),
+    ("[[3]]", "got [[3]]"),
+])
+def test_a_label_code_that_is_not_a_whole_number_is_refused(tmp_path, capsys, codes, words
+                                                           ) -> None:
+    from toy_brain import toy_labels
+
+    labels = toy_labels(tmp_path / "seg.nii.gz")
+    label_map = tmp_path / "map.json"
+    label_map.write_text(f'{{"gray": {codes}, "white": [2, 41]}}')
+    assert main(["mesh", "--labels", str(labels), "--label-map", str(label_map),
+                 "--out", str(tmp_path / "out")]) == 2
+    assert words in one_line(capsys)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_label_map_nested_too_deeply_or_with_a_byte_order_mark(tmp_path) -> None:
+    from brainbulge.errors import InputError
+    from brainbulge.geometry.brain.labels import read_label_map
+
+    deep = tmp_path / "deep.json"
+    deep.write_text('{"gray": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    with pytest.raises(InputError, match="nested too deeply"):
+        read_label_map(deep)
+    bom = tmp_path / "bom.json"
+    bom.write_bytes(b'\xef\xbb\xbf{"gray": [3, 42.0], "white": [2]}')
+    assert read_label_map(bom) == {"gray": [3, 42], "white": [2]}
 
 
 def test_a_brain_run_file_is_closed_too(tmp_path, capsys) -> None:
@@ -343,9 +421,29 @@ def test_the_help_defaults_are_accepted_as_written(capsys) -> None:
 
     with pytest.raises(SystemExit):
         build_parser().parse_args(["mesh", "--help"])
-    assert "(default 1e5)" in capsys.readouterr().out
+    assert "(default 1e5;" in capsys.readouterr().out
     args = build_parser().parse_args(["mesh", "--tets", "1e5"])
     assert args.tets == 100_000 and isinstance(args.tets, int)
+
+
+@pytest.mark.parametrize("command", ["brain", "mesh"])
+def test_the_help_states_the_least_tets_that_is_enforced(capsys, command) -> None:
+    import re
+
+    from brainbulge.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    least = int(re.search(r"ICBM152 template at least (\d+) x 8\^K", text)[1])
+    per_ml = float(re.search(r"--labels image at least ([\d.]+) per ml", text)[1])
+    checks.mesh_tets(least, 0, template=True)
+    checks.mesh_tets(least * 8, 1, template=True)
+    with pytest.raises(InputError, match=f"below {least:,}"):
+        checks.mesh_tets(least - 1, 0, template=True)
+    with pytest.raises(InputError, match="too coarse"):
+        checks.mesh_tets(int(per_ml * 1000 * 0.98), 0, template=False, labelled_ml=1000.0)
+    checks.mesh_tets(int(per_ml * 1000 * 1.02), 0, template=False, labelled_ml=1000.0)
 
 
 def test_an_over_long_out_is_refused_in_one_line(tmp_path, capsys) -> None:

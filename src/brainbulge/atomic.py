@@ -7,13 +7,15 @@ included, writes its files through it.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 
 @contextmanager
@@ -44,6 +46,30 @@ def atomic_output(path: Path) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
         raise
     note_written(path)
+
+
+def open_regular(path: Path | str, follow_links: bool = False) -> BinaryIO:
+    """``path`` opened for reading in binary if it is a regular file; `OSError` (``EINVAL``,
+    naming it) if it is a FIFO, a device, a socket or a folder, and (unless
+    ``follow_links``) ``ELOOP`` if it is a symbolic link. Opened without blocking and checked
+    before a byte is read, so that nothing put where a file is expected can hang a run or
+    make it read elsewhere."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | (0 if follow_links else os.O_NOFOLLOW)
+    fd = os.open(path, flags)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_regular(path: Path | str, follow_links: bool = False) -> bytes:
+    """The bytes of ``path`` if it is a regular file (`open_regular`)."""
+    with open_regular(path, follow_links) as fh:
+        return fh.read()
 
 
 #: The journal of a claimed output folder: one JSON line ``[path, size, mtime_ns]`` per file

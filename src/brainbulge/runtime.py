@@ -24,7 +24,12 @@ Calling it again changes nothing.
 from __future__ import annotations
 
 import os
+import signal
 
+#: signals that stop a run as Ctrl-C does (status written, children ended, exit 130): a batch
+#: system's time limit (SIGTERM; SLURM's ``--signal`` sends SIGUSR1 or SIGUSR2 before it, SGE's
+#: soft limit SIGXCPU or SIGUSR1), a closed terminal or SSH connection (SIGHUP)
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGUSR1, signal.SIGUSR2, signal.SIGXCPU)
 #: environment defaults for the thread and math libraries (a value set by the user wins)
 ENVIRONMENT = {"KMP_BLOCKTIME": "0", "MKL_CBWR": "AUTO"}
 

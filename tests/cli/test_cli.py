@@ -144,7 +144,7 @@ BAD = [
     (["study", "hemidisk-sector", "--alphas", "20", "--out", "{study}"], "16 scenarios, not 8"),
     # run files are closed: a misspelt table or option is named, never ignored
     (["run", "{toml:alpah = 70.0}"], "unknown option alpah in [hemidisk]; did you mean 'alpha'"),
-    (["run", "{toml:alpha = 70.0\n[caes]}"], "unknown table [caes]; did you mean 'case'?"),
+    (["run", "{toml:alpha = 70.0\n[caes]}"], "unknown table [caes]; did you mean [case]?"),
     (["run", "{brain_toml:flaps = 'left'}"], "did you mean 'flap'?"),
     # checked before --out is claimed, however cheap or costly the check
     (["study", "hemidisk-sector", "--alphas", "20", "20"], "repeats a value"),
@@ -301,7 +301,7 @@ def test_a_dask_scheduler_passes_the_probe_and_another_server_does_not(monkeypat
     from brainbulge.errors import InputError
 
     monkeypatch.setattr(checks, "SCHEDULER_PROBE_S", 1.0)
-    with LocalCluster(n_workers=0, processes=False, protocol="tcp://",
+    with LocalCluster(n_workers=1, processes=False, protocol="tcp://",
                       dashboard_address=":0") as cluster:
         address = cluster.scheduler_address
         checks.scheduler(address)

@@ -89,10 +89,21 @@ def test_no_compiler_is_said_once(tmp_path: Path) -> None:
     """An interpreter without ``ngscxx`` next to it or on ``PATH`` (a virtual environment
     made without NGSolve's scripts): one warning says so and what it costs; the second call
     returns False silently and ``PATH`` is left as it was."""
+    import site
+    import sysconfig
     import venv
 
-    venv.create(tmp_path / "env", system_site_packages=True, symlinks=True)
-    python = str(tmp_path / "env" / "bin" / "python")
+    # a new environment that sees this one's packages: its own site folder adds this
+    # interpreter's (``system_site_packages`` would give the base interpreter's, which inside
+    # a virtual environment lack brainbulge's dependencies)
+    env = tmp_path / "env"
+    venv.create(env, symlinks=True)
+    python = str(env / "bin" / "python")
+    ours = [*site.getsitepackages(), sysconfig.get_path("purelib")]
+    theirs = subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_path("
+                             "'purelib'))"], capture_output=True, text=True, check=True)
+    (Path(theirs.stdout.strip()) / "parent_environment.pth").write_text(
+        "".join(f"import site; site.addsitedir({p!r})\n" for p in dict.fromkeys(ours)))
     answers, logged = _ready_in_a_new_process(python, str(tmp_path))
     assert answers == ["False", "False", str(tmp_path)]
     assert len(logged) == 1 and logged[0].startswith("WARNING"), logged

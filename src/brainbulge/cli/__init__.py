@@ -25,6 +25,7 @@ from typing import Any
 
 from brainbulge import __version__
 from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.runtime import STOP_SIGNALS
 from brainbulge.runtime import configure as configure_runtime
 
 log = logging.getLogger("brainbulge")
@@ -37,16 +38,12 @@ _NO_WRITE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG)
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (e.g. a batch system's time limit) or SIGHUP (the terminal or SSH connection
-    closed): handled as an interruption."""
+    """One of `STOP_SIGNALS` (a batch system's time limit or its warning before it, a closed
+    terminal or SSH connection): handled as an interruption."""
 
     def __init__(self, signum: int = signal.SIGTERM) -> None:
         super().__init__(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
-
-
-#: signals that stop a command as Ctrl-C does (status written, children ended)
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
 
 class _QuietStream:
@@ -182,7 +179,8 @@ def _os_message(err: OSError) -> str:
     """One line for a failed write: what, why, what to do."""
     out = _RUN.folder.path if _RUN.folder is not None else None
     inside = out is not None and err.filename is not None and (
-        Path(out).resolve() in Path(str(err.filename)).resolve().parents)
+        Path(out).resolve() in (target := Path(str(err.filename)).resolve()).parents
+        or Path(out).resolve() == target)
     what = (f"cannot write {err.filename}" if inside else f"cannot access {err.filename}"
             if err.filename else "cannot write the results")
     why = (err.strerror or str(err)).rstrip(".").lower()
@@ -191,7 +189,8 @@ def _os_message(err: OSError) -> str:
         return f"{what}: {why}; free some space or choose another --out{kept}"
     if err.errno == errno.ENAMETOOLONG:
         return f"{what}: {why}; choose a shorter --out (or shorter scenario names)"
-    return f"{what}: {why}; " + ("choose a writable --out" if inside or not err.filename
+    writing = inside or not err.filename or err.errno == errno.EROFS
+    return f"{what}: {why}; " + ("choose a writable --out" if writing
                                  else "check that the file is readable")
 
 
@@ -396,7 +395,8 @@ def add_output_options(p: argparse.ArgumentParser, default_out: str) -> None:
 
 def add_cluster_options(p: argparse.ArgumentParser, what: str = "",
                         workers_note: str = "") -> None:
-    """``--scheduler`` and ``--workers`` (checked by :func:`brainbulge.cli.checks.cluster`);
+    """``--scheduler``, ``--workers`` and ``--worker-wait`` (checked by
+    :func:`brainbulge.cli.checks.cluster`);
     ``what``: the runs they apply to, as a prefix of the help."""
     prefix = f"{what}: " if what else ""
     p.add_argument("--scheduler", default=None,
@@ -404,6 +404,12 @@ def add_cluster_options(p: argparse.ArgumentParser, what: str = "",
                    "cluster); 'serial' runs in this process")
     p.add_argument("--workers", type=whole_number("--workers"), default=None,
                    help=f"{prefix}local worker processes{workers_note}")
+    from brainbulge.cli.checks import WORKER_WAIT_RANGE, WORKER_WAIT_S
+
+    p.add_argument("--worker-wait", type=float, default=WORKER_WAIT_S, metavar="S",
+                   help=f"{prefix}seconds to wait for a worker of a --scheduler that has none "
+                   f"before giving up (default {WORKER_WAIT_S:g}; range "
+                   f"[{WORKER_WAIT_RANGE[0]:g}, {WORKER_WAIT_RANGE[1]:g}])")
 
 
 def require(cond: bool, message: str) -> None:

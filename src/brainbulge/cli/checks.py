@@ -17,23 +17,12 @@ import typing
 from pathlib import Path
 from typing import Any, Union
 
-from brainbulge.errors import InputError
-from brainbulge.model.brain_case import TETS_RANGE
+from brainbulge.errors import BrainbulgeError, InputError
+from brainbulge.model.brain_case import LABELS_TETS_PER_ML, TEMPLATE_TETS_MIN, TETS_RANGE
 from brainbulge.model.options import number
 
 log = logging.getLogger(__name__)
 
-#: the coarsest mesh Netgen makes of the ICBM152 template: below ~25,000 target tets it
-#: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
-#: finish in 5 minutes)
-TEMPLATE_TETS_MIN = 25_000
-#: the template's labelled volume [ml] (all tissues of ``icbm152_tissue_image``)
-TEMPLATE_LABELLED_ML = 1883.0
-#: a user's segmentation (``--labels``): target tets per ml of labelled tissue before
-#: refinement. Netgen's trouble depends on the element size in mm against a brain's mm-scale
-#: surface, so the template's densities carry over: below 10,000 tets (5.3 per ml) it gave up
-#: on the template, from 25,000 (13.3 per ml) it meshes; in between a warning.
-LABELS_TETS_PER_ML = (10_000 / TEMPLATE_LABELLED_ML, TEMPLATE_TETS_MIN / TEMPLATE_LABELLED_ML)
 #: a custom flap centre must lie near the skull: |x|, |y|, |z| at most this [mm, RAS]
 FLAP_CENTRE_MM = 150.0
 #: local Dask worker processes (``--workers``)
@@ -42,6 +31,13 @@ WORKERS = (1, 256)
 SCHEDULER = re.compile(r"((tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]*[A-Za-z0-9\]]:\d{1,5}")
 #: seconds a Dask scheduler has to accept a connection before a study is refused
 SCHEDULER_PROBE_S = 5.0
+#: ``--worker-wait``: seconds a Dask scheduler without workers is waited on before the
+#: command is refused (a batch system may take minutes to start them), and its range
+WORKER_WAIT_S = 600.0
+WORKER_WAIT_RANGE = (0.0, 86_400.0)
+#: seconds between two questions to a scheduler without workers (the first is at once, so
+#: "no workers" is said within `SCHEDULER_PROBE_S` of the start)
+WORKER_POLL_S = 2.0
 
 
 # --------------------------------------------------------------------------- generic
@@ -133,7 +129,9 @@ def brain_npz(path: str | Path, what: str = "--mesh") -> None:
     if key in _READABLE:  # a study's scenarios share one mesh
         return
     try:
-        load_brain_mesh(p)
+        load_brain_mesh(p)  # every array checked (index range, NaN, codes, volumes)
+    except BrainbulgeError:
+        raise
     except Exception:  # noqa: BLE001 - truncated, foreign, text: all the same to the user
         raise InputError(f"{what} {path} is not a brain.npz written by `brainbulge mesh` "
                          "(unreadable or other arrays); build one with `brainbulge mesh "
@@ -230,17 +228,21 @@ _LABELLED_ML: dict[tuple[str, int, int, str], float] = {}
 # --------------------------------------------------------------------------- study
 
 
-def cluster(address: str | None, workers: int | None) -> None:
-    """``--scheduler`` (:func:`scheduler`) and ``--workers`` (None or within `WORKERS`)."""
+def cluster(address: str | None, workers: int | None,
+            worker_wait: float = WORKER_WAIT_S) -> None:
+    """``--scheduler`` (:func:`scheduler`), ``--workers`` (None or within `WORKERS`) and
+    ``--worker-wait`` (within `WORKER_WAIT_RANGE`)."""
     if workers is not None:
         number("--workers", workers, *WORKERS, integer=True)
-    scheduler(address)
+    number("--worker-wait", worker_wait, *WORKER_WAIT_RANGE)
+    scheduler(address, worker_wait)
 
 
-def scheduler(address: str | None) -> None:
+def scheduler(address: str | None, worker_wait: float = WORKER_WAIT_S) -> None:
     """``None``, ``serial`` or a Dask address ``[tcp://]host:port`` at which something
     accepts a connection within `SCHEDULER_PROBE_S` (tcp, tls, ws, wss; inproc and ucx
-    addresses are not probed)."""
+    addresses are not probed) and, over tcp, a Dask scheduler answers that has a worker
+    within ``worker_wait`` seconds (said on stderr at once if it has none)."""
     if address is None or address == "serial":
         return
     if not SCHEDULER.fullmatch(address):
@@ -266,12 +268,37 @@ def scheduler(address: str | None) -> None:
             "for a local cluster") from None
     if protocol not in ("", "tcp"):
         return  # a handshake over TLS or websockets needs the cluster's security settings
-    reply = _identity(address if protocol else f"tcp://{address}")
+    full = address if protocol else f"tcp://{address}"
+    reply = _identity(full)
     if not (isinstance(reply, dict) and reply.get("type") == "Scheduler"):
         raise InputError(
             f"--scheduler {address}: something listens there, but it is not a Dask scheduler "
             f"(no Dask handshake in {SCHEDULER_PROBE_S:g} s); give the scheduler's address "
             "(`dask scheduler` prints it), or leave --scheduler out for a local cluster")
+    _wait_for_workers(address, full, reply, worker_wait)
+
+
+def _wait_for_workers(address: str, full: str, reply: dict, worker_wait: float) -> None:
+    """Return once the scheduler at ``full`` (whose ``identity`` is ``reply``) has a worker;
+    say so at once if it has none; `InputError` if none joins within ``worker_wait`` s."""
+    import time
+
+    deadline = time.monotonic() + worker_wait
+    said = False
+    while not (isinstance(reply, dict) and reply.get("workers")):
+        if not said:
+            log.warning("no workers at %s; waiting up to %g s for one (--worker-wait)",
+                        address, worker_wait)
+            said = True
+        if time.monotonic() >= deadline:
+            raise InputError(
+                f"--scheduler {address}: no workers joined it in {worker_wait:g} s; start "
+                f"workers (`dask worker {full}`), give --worker-wait more seconds, or leave "
+                "--scheduler out for a local cluster")
+        time.sleep(max(0.0, min(WORKER_POLL_S, deadline - time.monotonic())))
+        reply = _identity(full)
+    if said:
+        log.warning("a worker joined %s; going on", address)
 
 
 def _identity(address: str) -> Any:

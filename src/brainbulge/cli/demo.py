@@ -37,7 +37,7 @@ def run_command(args: argparse.Namespace) -> int:
         run_named_study,
     )
 
-    checks.cluster(args.scheduler, args.workers)
+    checks.cluster(args.scheduler, args.workers, args.worker_wait)
     plan = demo_plan(args.quick)
     out = start_run(args, {"command": "demo", "quick": args.quick, **plan})
     parts = demo_scenarios(plan)

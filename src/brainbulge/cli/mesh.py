@@ -12,6 +12,7 @@ from typing import Any
 
 from brainbulge.errors import InputError
 from brainbulge.geometry.brain.defaults import VOLUME_OF
+from brainbulge.model.brain_case import TETS_FLOOR_TEXT, TETS_RANGE
 
 FLAPS = ("frontal", "left", "right", "custom")
 #: the ``[mesh]`` table of the run file: key -> the option it records
@@ -37,7 +38,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         '"brainstem": [...]} (default freesurfer)',
     )
     p.add_argument("--tets", type=whole_number("--tets"), default=100_000,
-                   help="about how many tets (default 1e5)")
+                   help=f"about how many tets (default 1e5; {TETS_FLOOR_TEXT}; at most "
+                   f"{TETS_RANGE[1]})")
     p.add_argument("--brain-volume", type=positive_float("--brain-volume"), default=None,
                    metavar="ML", help="scale the head so that the --volume-of volume is this "
                    "[ml] (the paper's brain, gray + white matter: 1108)")

@@ -95,7 +95,7 @@ def run_command(args: argparse.Namespace) -> int:
         require(all(abs(v) <= checks.FLAP_CENTRE_MM for v in c),
                 f"--centre {' '.join(f'{v:g}' for v in c)} is not near the skull: give a "
                 f"point on it, each coordinate within +-{checks.FLAP_CENTRE_MM:g} mm (RAS)")
-    checks.cluster(args.scheduler, args.workers)
+    checks.cluster(args.scheduler, args.workers, args.worker_wait)
     common = common_config(args)
     checks.brain_case({**common, "flap": "none"})  # the flaps are checked on the mesh
     config = {"command": "plan", "plan": {

@@ -54,7 +54,8 @@ def plan(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
     from brainbulge.cli import checks
     from brainbulge.studies.suites import paper_parts
 
-    checks.cluster(args.scheduler, getattr(args, "workers", None))
+    checks.cluster(args.scheduler, getattr(args, "workers", None),
+                   getattr(args, "worker_wait", checks.WORKER_WAIT_S))
     return paper_parts(args.tets, args.fix, args.mesh_size)
 
 

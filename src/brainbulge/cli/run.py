@@ -101,7 +101,7 @@ def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
 
     if command == "study":  # the other commands check --scheduler themselves
-        checks.cluster(args.scheduler, args.workers)
+        checks.cluster(args.scheduler, args.workers, args.worker_wait)
     elif args.workers is not None:
         checks.number("--workers", args.workers, *checks.WORKERS, integer=True)
     if command in ("hemidisk", "brain"):
@@ -127,7 +127,7 @@ def run_command(args: argparse.Namespace) -> int:
         return run_scenarios(args, config["study"], config["scenarios"])
     argv = _argv(command, config, str(args.config))
     command_args = _parse([command, *argv], str(args.config))
-    for name in ("out", "overwrite", "scheduler", "workers"):
+    for name in ("out", "overwrite", "scheduler", "workers", "worker_wait"):
         if hasattr(command_args, name):
             setattr(command_args, name, getattr(args, name))
     command_args.config = args.config  # the run file: an input, never deleted

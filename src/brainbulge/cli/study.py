@@ -72,7 +72,7 @@ def scenarios_for(name: str, args: argparse.Namespace) -> list[dict[str, Any]]:
 def run_command(args: argparse.Namespace) -> int:
     from brainbulge.cli import checks
 
-    checks.cluster(args.scheduler, args.workers)
+    checks.cluster(args.scheduler, args.workers, args.worker_wait)
     for option in ("alphas", "betas"):
         values = getattr(args, option) or []
         if len(set(values)) < len(values):

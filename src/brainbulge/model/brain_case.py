@@ -43,6 +43,20 @@ LINEAR_SOLVERS = ("pardiso", "krylov")
 SWELLING_RANGE = (0.5, 2.0)
 #: tets of a brain mesh: more than 5 million need more memory than a workstation has
 TETS_RANGE = (1_000, 5_000_000)
+#: the coarsest mesh Netgen makes of the ICBM152 template: below ~25,000 target tets it
+#: gives up ("too many trials") and retries for minutes (measured: 5,000 and 10,000 did not
+#: finish in 5 minutes)
+TEMPLATE_TETS_MIN = 25_000
+#: the template's labelled volume [ml] (all tissues of ``icbm152_tissue_image``)
+TEMPLATE_LABELLED_ML = 1883.0
+#: a user's segmentation (``--labels``): target tets per ml of labelled tissue before
+#: refinement. Netgen's trouble depends on the element size in mm against a brain's mm-scale
+#: surface, so the template's densities carry over: below 10,000 tets (5.3 per ml) it gave up
+#: on the template, from 25,000 (13.3 per ml) it meshes; in between a warning.
+LABELS_TETS_PER_ML = (10_000 / TEMPLATE_LABELLED_ML, TEMPLATE_TETS_MIN / TEMPLATE_LABELLED_ML)
+#: what ``--help`` says of the least ``--tets`` (the same numbers the checks enforce)
+TETS_FLOOR_TEXT = (f"of the ICBM152 template at least {TEMPLATE_TETS_MIN} x 8^K with --refine "
+                   f"K, of a --labels image at least {LABELS_TETS_PER_ML[0]:.1f} per ml of tissue")
 
 
 def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None = None,
@@ -97,7 +111,8 @@ class CraniectomyCase:
                         choices=tuple(SWELL_SIDES))
     swelling: float = option(1.1, "target Js of the white matter (the paper's 1.1)",
                              range=SWELLING_RANGE, label="swelling Js")
-    tets: int = option(30_000, "build a mesh of about this many tets", range=TETS_RANGE,
+    tets: int = option(30_000, f"build a mesh of about this many tets: {TETS_FLOOR_TEXT}",
+                       range=TETS_RANGE,
                        solver=True)
     mesh: str | None = option(None, "brain.npz written by `brainbulge mesh` (fixes the "
                               "geometry: overrides --tets and the geometry options)")
@@ -223,7 +238,8 @@ class CraniectomyCase:
                              "refined one with `brainbulge mesh --refine` and pass that")
         self._check_sequencing()
         if self.fibres is not None and not Path(self.fibres).is_file():
-            raise InputError(f"fibre image {self.fibres} does not exist")
+            raise InputError(f"fibre image {self.fibres} does not exist or is not a regular "
+                             "file; give a NIfTI file (.nii/.nii.gz) of shape (nx, ny, nz, 3)")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
 

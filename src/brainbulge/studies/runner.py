@@ -52,6 +52,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import re
 import sys
 import traceback
@@ -64,6 +65,7 @@ from typing import Any
 
 from tqdm.auto import tqdm
 
+from brainbulge.atomic import open_regular, read_regular
 from brainbulge.errors import InputError
 from brainbulge.results.records.output_folder import refresh_manifest
 from brainbulge.results.records.run_record import atomic_write_json
@@ -94,10 +96,11 @@ SERIAL = "serial"
 #: Scenario names: start with a letter or digit, then letters, digits, ``_``, ``-``, ``.``.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
 
-#: Names that would collide with files the runner or the run record write into ``out_dir``.
-RESERVED_NAMES = frozenset(
-    {"study.json", "run.json", "run.toml", "status.json", "summary.json", "error.json"}
-)
+#: Names ending so (ignoring case) would collide with files the runner, the run record, the
+#: log and the study's reports write into ``out_dir`` (``study.json``, ``run.toml``,
+#: ``brainbulge.log``, ``report.md``, ``report.html``, ``table.csv``, its figures, ...).
+RESERVED_SUFFIXES = (".json", ".toml", ".log", ".md", ".html", ".csv", ".png", ".npz", ".vtu",
+                     ".pvd", ".xdmf", ".h5")
 
 CONNECT_TIMEOUT = "10s"  #: how long to try to reach an existing Dask scheduler
 
@@ -123,7 +126,11 @@ def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
         name = scenario.get("name")
         if not isinstance(name, str) or not name:
             raise InputError(f"scenario #{i} has no 'name'; give every scenario a unique name")
-        if not NAME_PATTERN.fullmatch(name) or name.lower() in RESERVED_NAMES:
+        if name.lower().endswith(RESERVED_SUFFIXES):
+            raise InputError(
+                f"scenario name {name!r} is reserved: names ending in "
+                f"{', '.join(RESERVED_SUFFIXES)} are the study's own files; choose another name")
+        if not NAME_PATTERN.fullmatch(name):
             raise InputError(
                 f"scenario name {name!r} is not allowed; use up to 100 letters, digits, '_', "
                 "'-' or '.', starting with a letter or digit"
@@ -142,9 +149,11 @@ def validate_scenarios(scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _read_json(path: Path) -> Any:
+    """The JSON in ``path``; None if it is missing, unreadable, not JSON or not a regular
+    file (a link, a FIFO: never followed, never waited on)."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return json.loads(read_regular(path).decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
         return None
 
 
@@ -164,14 +173,16 @@ def _readable(path: Path) -> bool:
     """``path`` is a complete file: an ``.npz`` whose members all pass their checksums, a
     ``.json`` that parses, anything else not empty."""
     try:
-        if path.suffix == ".npz":
-            with zipfile.ZipFile(path) as archive:
-                return archive.testzip() is None
-        if path.suffix == ".json":
-            json.loads(path.read_text(encoding="utf-8"))
-            return True
-        return path.stat().st_size > 0
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        # a link or a FIFO is not a result (and is never waited on)
+        with open_regular(path) as fh:
+            if path.suffix == ".npz":
+                with zipfile.ZipFile(fh) as archive:
+                    return archive.testzip() is None
+            if path.suffix == ".json":
+                json.loads(fh.read().decode("utf-8"))
+                return True
+            return os.fstat(fh.fileno()).st_size > 0
+    except (OSError, ValueError, RecursionError, zipfile.BadZipFile, EOFError):
         return False
 
 
@@ -218,6 +229,9 @@ class _Study:
         pending = []
         for i, scenario in enumerate(self.scenarios):
             folder = self.scenario_dir(i)
+            if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+                raise InputError(f"{folder} is a link or a file, not a scenario folder that "
+                                 "brainbulge made; move it away and rerun")
             summary = _finished_summary(folder, scenario, self.outputs)
             if summary is not None:
                 self.results[i], self.status[i], self.resumed[i] = summary, "complete", True

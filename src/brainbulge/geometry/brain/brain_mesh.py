@@ -397,11 +397,21 @@ def _scale_affine(affine: np.ndarray, factor: float, centre_mm: np.ndarray) -> n
     return scale @ affine
 
 
-def check_brain_mesh(mesh: BrainMesh) -> None:
-    """Raise :class:`MeshError` for inverted or degenerate tets or an empty gray/white region."""
+#: the least volume of a usable tet [mm^3]; at or below it a tet is degenerate (or inverted)
+MIN_TET_VOLUME_MM3 = 1e-9
+
+
+def check_brain_mesh(mesh: BrainMesh, source: object = None) -> None:
+    """Raise :class:`MeshError` (exit 5) for inverted (negative volume) or degenerate (at
+    most `MIN_TET_VOLUME_MM3`) tets or an empty gray/white region; ``source``: the file the
+    mesh was read from, named in the message."""
     vol = mesh.tet_volumes_mm3()
-    if np.any(vol <= 1e-9):
-        raise MeshError(f"{int((vol <= 1e-9).sum())} inverted or degenerate tetrahedra")
+    where = f"brain mesh {source}: " if source is not None else ""
+    inverted, degenerate = int((vol < 0).sum()), int((np.abs(vol) <= MIN_TET_VOLUME_MM3).sum())
+    if inverted or degenerate:
+        raise MeshError(f"{where}{inverted} of {len(vol)} tetrahedra inverted (negative volume)"
+                        f" and {degenerate} degenerate (no volume); rebuild the mesh")
     for code in (1, 2):
         if not np.any(mesh.tissue == code):
-            raise MeshError(f"region {TISSUES[code]!r} has no element: ask for more tets")
+            raise MeshError(f"{where}region {TISSUES[code]!r} has no element: ask for more "
+                            "tets")

@@ -7,6 +7,7 @@ import logging
 import zipfile
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import meshio
 import numpy as np
@@ -172,12 +173,63 @@ def stored_tets(path: str | Path) -> int:
         raise InputError(f"cannot read brain mesh {path}: {err}; give a brain.npz") from None
 
 
+def check_mesh_arrays(d: Any, path: str | Path) -> None:
+    """Refuse (`InputError`, one line naming the array) the arrays of a ``brain.npz`` that
+    NGSolve, Netgen or the solver would not survive or would misread: shapes and integer
+    types, node indices within the nodes (a bad index crashes native code), finite
+    coordinates [mm], known tissue and side codes, faces on existing nodes and tets. Element
+    volumes are checked on the mesh (:func:`check_brain_mesh`, exit 5)."""
+    def bad(what: str) -> InputError:
+        return InputError(f"brain mesh {path}: {what}; rebuild it with `brainbulge mesh "
+                          "--out DIR` and pass DIR/brain.npz")
+
+    nodes, tets, faces = d["nodes_mm"], d["tets"], d["faces"]
+    arrays = {"tets": tets, "tissue": d["tissue"], "side": d["side"], "faces": faces,
+              "face_tet": d["face_tet"]}
+    if nodes.ndim != 2 or nodes.shape[1] != 3 or not len(nodes) or nodes.dtype.kind != "f":
+        raise bad(f"nodes_mm has shape {nodes.shape} ({nodes.dtype}), not (n, 3) numbers")
+    if not np.all(np.isfinite(nodes)):
+        raise bad(f"{int((~np.isfinite(nodes).all(axis=1)).sum())} nodes have a NaN or "
+                  "infinite coordinate")
+    for name, a in arrays.items():
+        if a.dtype.kind not in "iu":
+            raise bad(f"{name} holds {a.dtype} values, not whole numbers")
+    if tets.ndim != 2 or tets.shape[1] != 4 or not len(tets):
+        raise bad(f"tets has shape {tets.shape}, not (n, 4) node indices")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise bad(f"faces has shape {faces.shape}, not (n, 3) node indices")
+    for name, a in (("tets", tets), ("faces", faces)):
+        if a.size and (a.min() < 0 or a.max() >= len(nodes)):
+            raise bad(f"{name} refers to node {int(a.min() if a.min() < 0 else a.max())}, "
+                      f"outside the {len(nodes)} nodes")
+    for name, n, codes in (("tissue", len(tets), TISSUES), ("side", len(tets), SIDES),
+                           ("face_tet", len(faces), range(len(tets)))):
+        a = arrays[name]
+        if a.shape != (n,):
+            raise bad(f"{name} has shape {a.shape}, not ({n},)")
+        unknown = a[~np.isin(a, list(codes))] if name != "face_tet" else a[(a < 0)
+                                                                          | (a >= len(tets))]
+        if unknown.size:
+            raise bad(f"{name} holds {int(unknown[0])}, not one of "
+                      + (f"{len(tets)} tets" if name == "face_tet" else
+                         ", ".join(f"{k} ({v})" for k, v in codes.items())))
+    if d["base"].shape != (len(faces),):
+        raise bad(f"base has shape {d['base'].shape}, not ({len(faces)},)")
+
+
 def load_brain_mesh(path: str | Path) -> BrainMesh:
-    """Read a ``brain.npz`` written by :func:`save_brain_mesh` (a second or two)."""
+    """Read a ``brain.npz`` written by :func:`save_brain_mesh` (a second or two), its arrays
+    checked whole (:func:`check_mesh_arrays`: `InputError`; inverted or degenerate tets,
+    an empty gray or white region: `MeshError`, exit 5)."""
+    from brainbulge.geometry.brain.brain_mesh import check_brain_mesh
+
     try:
         d = np.load(path)
-    except (OSError, ValueError) as err:
-        raise InputError(f"cannot read brain mesh {path}: {err}; give a brain.npz") from None
+    except (OSError, ValueError):
+        raise InputError(f"brain mesh {path} is not a brain.npz written by `brainbulge mesh` "
+                         "(unreadable, or not an .npz of arrays); build one with `brainbulge "
+                         "mesh --out DIR` and pass DIR/brain.npz") from None
+    check_mesh_arrays(d, path)
     mesh = BrainMesh(
         d["nodes_mm"], d["tets"], d["tissue"], d["side"], d["faces"], d["face_tet"],
         d["base"], float(d["base_z_mm"]),
@@ -194,4 +246,5 @@ def load_brain_mesh(path: str | Path) -> BrainMesh:
     for f in json.loads(str(d["flaps_json"])).values():
         f = {k: tuple(v) if isinstance(v, list) else v for k, v in f.items()}
         mesh.add_flap(Flap(**f))
+    check_brain_mesh(mesh, path)
     return mesh

@@ -27,12 +27,34 @@ def check_shape(shape: tuple[int, ...], path: str | Path) -> None:
 
 
 def check_fibres(path: str | Path) -> None:
-    """Read only ``path``'s header: a NIfTI of the shape `check_shape` wants, whose data
-    fits in memory. For checking a command's inputs before it starts."""
+    """``path`` reads as a fibre image (`read_fibres`: header, shape, size, values); for
+    checking a command's inputs before it starts (before anything is meshed). A file checked
+    once (same size and modification time) is not read again."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError as err:
+        raise InputError(f"cannot read fibre image {path}: {err.strerror or err}; give a NIfTI "
+                         "file (.nii/.nii.gz) of shape (nx, ny, nz, 3)") from None
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _CHECKED:
+        read_fibres(path)
+        _CHECKED.add(key)
+
+
+_CHECKED: set[tuple[str, int, int]] = set()
+
+
+def read_fibres(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """The directions (nx, ny, nz, 3) and the voxel-to-world affine of the fibre image
+    ``path``; `InputError` (one line) for a file that is not a NIfTI, of another shape,
+    larger than the memory available, with NaN or infinite components, or whose affine is
+    not finite and invertible. Zero vectors are allowed (no direction there)."""
     import nibabel as nib
 
-    from brainbulge.geometry.brain.labels import check_declared_size
+    from brainbulge.geometry.brain.labels import check_declared_size, check_regular_file
 
+    check_regular_file(path, "fibre image")
     try:
         img = nib.load(str(path))
     except Exception as err:  # noqa: BLE001 - nibabel raises several types
@@ -40,30 +62,30 @@ def check_fibres(path: str | Path) -> None:
                          "NIfTI file (.nii/.nii.gz) of shape (nx, ny, nz, 3)") from None
     check_shape(img.shape, path)
     check_declared_size(img, path, "fibre image", work_bytes_per_voxel=8)
+    try:
+        data = np.squeeze(np.asarray(img.dataobj, dtype=np.float32))
+    except Exception as err:  # noqa: BLE001 - truncated data
+        raise InputError(f"cannot read fibre image {path}: {type(err).__name__}; give a "
+                         "complete NIfTI file") from None
+    bad = ~np.all(np.isfinite(data), axis=-1)
+    if bad.any():
+        raise InputError(
+            f"fibre image {path} has {int(bad.sum())} voxels with a NaN or infinite "
+            "component; set them to 0 (no direction there: the radial default is used)")
+    affine = np.asarray(img.affine, dtype=float)
+    if not np.all(np.isfinite(affine)) or abs(np.linalg.det(affine[:3, :3])) < 1e-12:
+        raise InputError(f"fibre image {path} has a voxel-to-world affine that is not finite "
+                         "and invertible; correct its NIfTI header (sform/qform)")
+    return data, affine
 
 
 class FibreField:
     """Unit axon directions at world points (mm), read from a vector NIfTI."""
 
     def __init__(self, path: str | Path, centre_mm: np.ndarray) -> None:
-        import nibabel as nib
-
-        from brainbulge.geometry.brain.labels import check_declared_size
-
-        try:
-            img = nib.load(str(path))
-        except Exception as err:  # nibabel raises several types for unreadable files
-            raise InputError(f"cannot read fibre image {path}: {err}; give a NIfTI file") from None
-        check_shape(img.shape, path)
-        check_declared_size(img, path, "fibre image", work_bytes_per_voxel=8)
-        try:
-            data = np.squeeze(np.asarray(img.dataobj, dtype=np.float32))
-        except Exception as err:  # noqa: BLE001 - truncated data
-            raise InputError(f"cannot read fibre image {path}: {err}; give a NIfTI file") from None
-        if not np.all(np.isfinite(data)):
-            raise InputError(f"fibre image {path} holds NaN or infinite values; mask them to 0")
+        data, affine = read_fibres(path)
         self.data = data
-        self.inv = np.linalg.inv(img.affine)
+        self.inv = np.linalg.inv(affine)
         self.centre_mm = np.asarray(centre_mm, dtype=float)
 
     def __call__(self, points_mm: np.ndarray) -> np.ndarray:

@@ -80,6 +80,21 @@ def available_memory_bytes() -> int | None:
         return None
 
 
+def check_regular_file(path: str | Path, what: str) -> None:
+    """Refuse (`InputError`) an input image that is not a regular file (a FIFO, a device, a
+    folder: reading one could wait for good); a link to a regular file is fine."""
+    import stat
+
+    try:
+        mode = Path(path).stat().st_mode
+    except OSError as err:
+        raise InputError(f"cannot read {what} {path}: {err.strerror or err}; give a NIfTI "
+                         "file (.nii/.nii.gz)") from None
+    if not stat.S_ISREG(mode):
+        raise InputError(f"{what} {path} is not a regular file (a FIFO, a device or a "
+                         "folder); give a NIfTI file (.nii/.nii.gz)")
+
+
 def check_declared_size(img: object, path: str | Path, what: str,
                         work_bytes_per_voxel: int = WORK_BYTES_PER_VOXEL) -> None:
     """Refuse (`InputError`) a NIfTI image whose header declares more voxels than the memory
@@ -181,10 +196,12 @@ def read_label_map(label_map: str | Path | dict[str, list[int]]) -> dict[str, li
                 'give a preset name or a JSON file {"gray": [codes], ...}'
             )
         try:
-            mapping = json.loads(path.read_text())
-        except (OSError, ValueError) as err:
+            mapping = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (OSError, ValueError, RecursionError) as err:
+            why = "nested too deeply" if isinstance(err, RecursionError) else " ".join(
+                str(err).split())
             raise InputError(
-                f'cannot read label map {path}: {err}; write it as JSON {{"gray": [3, 42], ...}}'
+                f'cannot read label map {path}: {why}; write it as JSON {{"gray": [3, 42], ...}}'
             ) from None
     if not isinstance(mapping, dict):
         raise InputError('label map must be a JSON object {"gray": [codes], ...}')
@@ -196,10 +213,14 @@ def read_label_map(label_map: str | Path | dict[str, list[int]]) -> dict[str, li
     for name in ("gray", "white"):
         if not mapping.get(name):
             raise InputError(f"label map gives no codes for {name!r}: add its label codes")
-    try:
-        codes = {name: [int(c) for c in codes] for name, codes in mapping.items()}
-    except (TypeError, ValueError):
-        raise InputError('label map codes must be integers, e.g. {"gray": [3, 42]}') from None
+    for name, values in mapping.items():
+        whole = isinstance(values, list) and all(
+            isinstance(c, int | float) and not isinstance(c, bool) and float(c).is_integer()
+            and abs(c) < 2**31 for c in values)
+        if not whole:
+            raise InputError(f"label map codes of {name!r} must be a list of whole numbers, got "
+                             f"{json.dumps(values)[:60]}; write e.g. {{\"gray\": [3, 42]}}")
+    codes = {name: [int(c) for c in values] for name, values in mapping.items()}
     owner: dict[int, str] = {}
     for name, values in codes.items():
         for code in values:
@@ -259,6 +280,7 @@ def load_tissue_image(
     """Read a NIfTI label image (``.nii``/``.nii.gz``) and map it to tissues (see module doc)."""
     import nibabel as nib
 
+    check_regular_file(path, "label image")
     try:
         img = nib.load(str(path))
     except Exception as err:  # nibabel raises many types for unreadable files

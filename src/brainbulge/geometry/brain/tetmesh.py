@@ -175,7 +175,9 @@ def _end_with(parent: int) -> None:
     import os
     import signal
 
-    for signum in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+    from brainbulge.runtime import STOP_SIGNALS
+
+    for signum in (*STOP_SIGNALS, signal.SIGINT):
         signal.signal(signum, signal.SIG_DFL)
     try:
         import ctypes

@@ -43,9 +43,33 @@ def block_marker(name: str) -> str:
 
 
 def _renderer():
+    """CommonMark with tables and without raw HTML: any ``<`` in the Markdown (a scenario
+    name, a note, an error message, a path) is shown as text, never read as a tag."""
     from markdown_it import MarkdownIt
 
-    return MarkdownIt("commonmark", {"html": True}).enable("table")
+    return MarkdownIt("commonmark", {"html": False}).enable("table")
+
+
+def _keep_markers(tokens: list) -> list:
+    """The parsed Markdown with each paragraph that is exactly one of our markers
+    (:func:`views_marker`, :func:`block_marker`) turned back into that HTML comment, for
+    :func:`markdown_html` to replace; a marker inside other text stays escaped text."""
+    out: list = []
+    i = 0
+    while i < len(tokens):
+        tok = tokens[i]
+        if (tok.type == "paragraph_open" and i + 2 < len(tokens)
+                and tokens[i + 2].type == "paragraph_close"
+                and (VIEWS_MARKER.fullmatch(tokens[i + 1].content)
+                     or BLOCK_MARKER.fullmatch(tokens[i + 1].content))):
+            tok.type, tok.tag, tok.nesting = "html_block", "", 0
+            tok.content, tok.children = tokens[i + 1].content + "\n", None
+            out.append(tok)
+            i += 3
+            continue
+        out.append(tok)
+        i += 1
+    return out
 
 
 def _embed_images(tokens, root: Path) -> None:
@@ -72,7 +96,7 @@ def markdown_html(md_path: Path, blocks: Mapping[str, str] | None = None) -> str
     md_path = Path(md_path)
     root = md_path.parent
     md = _renderer()
-    tokens = md.parse(md_path.read_text(encoding="utf-8"))
+    tokens = _keep_markers(md.parse(md_path.read_text(encoding="utf-8")))
     _embed_images(tokens, root)
     body = md.renderer.render(tokens, md.options, {})
     body = body.replace("<table>", '<table class="sortable">')

@@ -17,6 +17,7 @@ from datetime import date, datetime, time
 from pathlib import Path, PurePath
 from typing import Any
 
+from brainbulge.atomic import read_regular
 from brainbulge.errors import InputError
 
 
@@ -60,11 +61,11 @@ def load_config(path: Path) -> dict[str, Any]:
     syntax error) if it is missing, unreadable or not valid TOML."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_regular(path, follow_links=True)  # a FIFO or a device: refused, not read
     except OSError as exc:
         raise InputError(f"cannot read config {path}: {exc.strerror or exc}") from exc
     try:
-        text = data.decode("utf-8")
+        text = data.decode("utf-8-sig")  # a byte-order mark, as Windows editors write one
     except UnicodeDecodeError as exc:
         raise InputError(
             f"config {path} is not UTF-8 text (byte {exc.start}); save it as UTF-8"
@@ -80,6 +81,14 @@ def load_config(path: Path) -> dict[str, Any]:
         msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)\s*$", "", msg)
         where = f"line {lineno}" if lineno is not None else "end of file"
         raise InputError(f"invalid TOML in {path}, {where}: {msg}") from exc
+    except RecursionError:
+        raise InputError(f"invalid TOML in {path}: tables or lists nested too deeply to read; "
+                         "a run file needs at most a few levels") from None
+
+
+def _is_table(sub: Any) -> bool:
+    """Whether a schema entry describes a table or an array of tables (not a value)."""
+    return isinstance(sub, dict | list)
 
 
 #: A run file's schema: key -> None (a value of any kind), a schema (a table) or a list of
@@ -94,15 +103,22 @@ def check_keys(config: Mapping[str, Any], schema: Schema, where: str, _table: st
     for key, value in config.items():
         name = f"{_table}.{key}" if _table else key
         if key not in schema:
-            kind = "table" if isinstance(value, Mapping) else "option"
-            shown = f"[{name}]" if kind == "table" else key
-            homes = [t for t, sub in schema.items() if isinstance(sub, dict) and key in sub]
+            table = isinstance(value, Mapping)
+            kind = "table" if table else "option"
+            shown = f"[{name}]" if table else key
+            homes = [t for t, sub in schema.items() if isinstance(sub, dict) and key in sub
+                     and _is_table(sub[key]) == table]
+            # a table is matched against tables only, an option against anything
+            names = [k for k, sub in schema.items() if _is_table(sub) or not table]
+            near = difflib.get_close_matches(key, names, n=1, cutoff=0.6)
             if homes:
                 hint = f"it belongs in [{_table + '.' if _table else ''}{homes[0]}]"
+            elif near:
+                hint = f"did you mean [{near[0]}]?" if table else f"did you mean {near[0]!r}?"
+            elif names:
+                hint = f"valid {'tables ' if table else ''}here: {', '.join(sorted(names))}"
             else:
-                near = difflib.get_close_matches(key, list(schema), n=1, cutoff=0.6)
-                hint = (f"did you mean {near[0]!r}?" if near else
-                        f"valid here: {', '.join(sorted(schema))}")
+                hint = f"[{_table}] holds options only; write them under [{_table}]"
             raise InputError(f"{where}: unknown {kind} {shown}" + (
                 f" in [{_table}]" if _table and kind == "option" else "") + f"; {hint}")
         sub = schema[key]

@@ -12,11 +12,12 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import stat
 import tempfile
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from brainbulge.atomic import JOURNAL
+from brainbulge.atomic import JOURNAL, read_regular
 from brainbulge.errors import InputError
 
 #: The lock file of a folder in use (not part of any manifest).
@@ -64,14 +65,36 @@ def folder_files(path: Path) -> dict[str, Signature]:
     return found
 
 
+def check_no_special_entries(path: Path) -> None:
+    """Refuse (`InputError`) a folder to resume in that holds a symbolic link, a FIFO, a
+    device or a socket anywhere: brainbulge writes none, and going on would read, write or
+    delete through it (outside the folder) or wait on it for good."""
+    for dirpath, dirnames, filenames in os.walk(path, followlinks=False):
+        here = Path(dirpath)
+        for name in (*dirnames, *filenames):
+            entry = here / name
+            try:
+                mode = entry.lstat().st_mode
+            except OSError:
+                continue
+            kind = ("a symbolic link" if stat.S_ISLNK(mode) else None if stat.S_ISREG(mode)
+                    or stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                    else "a socket" if stat.S_ISSOCK(mode) else "a device file")
+            if kind is not None:
+                raise InputError(
+                    f"cannot resume in {path}: {entry} is {kind}, which brainbulge never "
+                    "writes (resuming would go through it); move it away and rerun, or "
+                    "choose another --out")
+
+
 def read_manifest(path: Path) -> Manifest | None:
     """The files listed in ``path/run.json`` and in a journal left by a killed run, as
     `Manifest` (``None`` if there is neither). Lists of names (older runs) read as files
     without signatures."""
     path = Path(path)
     try:
-        record = json.loads((path / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        record = json.loads(read_regular(path / "run.json").decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
         record = None
     files = record.get(MANIFEST_KEY) if isinstance(record, dict) else None
     manifest: Manifest | None = None
@@ -98,7 +121,7 @@ def read_journal(path: Path) -> Manifest:
     """The files the journal of ``path`` lists (the last entry of each); {} if none."""
     found: Manifest = {}
     try:
-        lines = (Path(path) / JOURNAL).read_text(encoding="utf-8").splitlines()
+        lines = read_regular(Path(path) / JOURNAL).decode("utf-8").splitlines()
     except (OSError, UnicodeDecodeError):
         return found
     for line in lines:

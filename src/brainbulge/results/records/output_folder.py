@@ -40,13 +40,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from brainbulge.atomic import JOURNAL
+from brainbulge.atomic import JOURNAL, read_regular
 from brainbulge.errors import InputError
 from brainbulge.results.records.manifest import (
     ASIDE,
     LOCK_FILE,
     MANIFEST_KEY,
     Manifest,
+    check_no_special_entries,
     clear_listed,
     config_paths,
     folder_files,
@@ -113,6 +114,9 @@ def check_out_path(path: Path | str, overwrite: bool) -> Path:
         raise InputError(f"--out is {full} characters long as a full path; the results need "
                          f"{NAME_ROOM} more, and the file system allows {path_max}: choose a "
                          "shorter --out")
+    if path.is_symlink() and not path.exists():
+        raise InputError(f"--out {path} is a symbolic link to nothing (its target is missing, "
+                         "or the link loops); remove the link or choose another --out")
     if path.exists() and not path.is_dir():
         raise InputError(f"output folder {path} exists and is a file; choose another --out")
     if overwrite and path.exists():
@@ -217,6 +221,7 @@ def _inspect(path: Path, overwrite: bool, resume: bool, config: dict[str, Any] |
                 f"cannot resume: output folder {path} is not empty and holds no study.json"
                 " or restart.npz; choose another --out"
             )
+        check_no_special_entries(path)
         _check_same_run(path, config)
         return "resume"
     if not overwrite:
@@ -272,8 +277,8 @@ def _pid_alive(pid: int, since: float) -> bool:
 
 def _read_lock(lock: Path) -> dict[str, Any] | None:
     try:
-        data = json.loads(lock.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = json.loads(read_regular(lock).decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
 
@@ -372,8 +377,8 @@ class OutputFolder:
 
         run_json = self.path / "run.json"
         try:
-            record = json.loads(run_json.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            record = json.loads(read_regular(run_json).decode("utf-8"))
+        except (OSError, ValueError, RecursionError):
             return
         record[MANIFEST_KEY] = {f: None if sig is None else list(sig)
                                 for f, sig in sorted(self.manifest().items())}
