@@ -261,6 +261,7 @@ def without_contrast_path() -> None:
     the fine mesh)."""
     from brainbulge.solver import contrast
     from brainbulge.solver.remesh import sequencing as seq
+    from brainbulge.solver.state import State
 
     contrast.CONTRAST_START = math.inf  # the path: the model's contrast alone
     stalled: dict[int, tuple] = {}
@@ -269,20 +270,18 @@ def without_contrast_path() -> None:
     def fine_stage(form, options, start):
         sol, first = equilibrate(form, options, start)
         if not sol.converged:
-            stalled[id(form)] = (sol, form.gfu.vec.FV().NumPy().copy(),
-                                 [v.copy() for v in form.multiplier_state()])
+            stalled[id(form)] = (sol, State(form).snapshot())
         return sol, first
 
     class NoFallback(seq.NewtonSolver):
         def solve(self):
             if id(self.form) not in stalled:
                 return super().solve()
-            sol, x, lam = stalled.pop(id(self.form))
-            self.form.gfu.vec.FV().NumPy()[:] = x
-            self.form.restore_multipliers(lam)
+            sol, snap = stalled.pop(id(self.form))
+            self.state.restore(snap)
             self.form.set_load(sol.load)
             for pc in self.form.point_contacts:
-                pc.update(x)
+                pc.update(self.form.gfu.vec.FV().NumPy())
             return sol
 
     seq.equilibrate_through_contrast = fine_stage

@@ -107,7 +107,7 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     steps = max(1, round(load / 0.25))
     for k in range(1, steps + 1):
         form.set_load(load * k / steps)
-        ok, _, _ = ns.newton(x)
+        ok = ns.newton().converged
         if not ok:
             raise RuntimeError(f"Newton failed at load {load * k / steps}")
     info["state_s"] = time.perf_counter() - t0
@@ -116,13 +116,13 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
 
     def system():
         """The tangent at ``x`` and the bubble-condensed residual (as Newton forms them)."""
-        ns.residual(x)
-        K = ns.tangent(x)
+        ns.equations.residual(x)
+        K = ns.equations.tangent(x)
         rhs = x.CreateVector()
-        rhs.data = ns.res
+        rhs.data = ns.equations.res
         r = rhs.FV().NumPy()
-        if ns.closed is not None:  # the closed-form MINI tangent condenses by itself
-            r[:] += ns.closed.extend_trans(r)
+        if ns.equations.closed is not None:  # the closed-form MINI tangent condenses by itself
+            r[:] += ns.equations.closed.extend_trans(r)
         else:
             rhs.data += form.a.harmonic_extension_trans * rhs
         return K, rhs
@@ -130,16 +130,16 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     t0 = time.perf_counter()
     K1, rhs1 = system()
     info["assembly_s"] = time.perf_counter() - t0
-    dx = ns.newton_direction(x)  # one Newton step: the next tangent
+    dx = ns.equations.newton_direction(x)  # one Newton step: the next tangent
     if isinstance(dx, tuple):  # (dx, contact multiplier steps)
         dx = dx[0]
     x.data -= dx
     K2, rhs2 = system()
-    free = ns.free
+    free = ns.equations.free
     lay = displacement_layout(form, free)
     mass_w = pressure_schur_mass(form, free)
     mass_u = pressure_schur_mass(form, free, weighted=False)
-    arrays = {"is_u": ns.is_u_free, "coords": lay.coords, "vertex": lay.vertex,
+    arrays = {"is_u": ns.equations.is_u_free, "coords": lay.coords, "vertex": lay.vertex,
               "component": lay.component}
     for name, K, rhs in (("1", K1, rhs1), ("2", K2, rhs2)):
         arrays[f"rhs{name}"] = rhs.FV().NumPy()[free]
@@ -148,7 +148,7 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     sp.save_npz(out / "mass_weighted.npz", mass_w)
     sp.save_npz(out / "mass_unweighted.npz", mass_u)
     info["dofs"] = int(K1.shape[0])
-    info["dofs_u"] = int(ns.is_u_free.sum())
+    info["dofs_u"] = int(ns.equations.is_u_free.sum())
     info["nnz"] = int(K1.nnz)
     return info
 

@@ -34,8 +34,9 @@ import time
 from collections.abc import Callable
 
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
+from brainbulge.solver.state import State
 
 log = logging.getLogger("brainbulge")
 
@@ -89,7 +90,7 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
     previous: MixedForm | None = None
     step_options = (dataclasses.replace(options, required_progress=options.contrast_progress)
                     if len(path) > 1 else options)
-    records, linear, assembly, solve_time = [], 0, 0.0, 0.0
+    records, costs = [], Costs()
     first: float | None = None
     while True:
         step_form = form if kappa >= target else MixedForm(
@@ -102,12 +103,10 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
         solver = NewtonSolver(step_form, step_options)
         sol = solver.equilibrate()
         solver.release_linear_solver()
-        if first is None and solver.history:
-            first = solver.history[0][0]
+        if first is None and sol.newton_results:
+            first = sol.newton_results[0].residuals[0]
         records += sol.steps
-        linear += sol.linear_iterations
-        assembly += sol.assembly_time_s
-        solve_time += sol.solve_time_s
+        costs.add(sol)
         if len(path) > 1:
             log.info("  contrast %.3g of %.3g: %s in %d Newton iterations", kappa, target,
                      "converged" if sol.converged else "not converged",
@@ -121,15 +120,14 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
     if sol.converged:  # one record at full load: the path's steps are not load steps
         sol.steps = [dataclasses.replace(
             sol.steps[-1], newton_iterations=sum(r.newton_iterations for r in records))]
-    sol.linear_iterations, sol.assembly_time_s, sol.solve_time_s = linear, assembly, solve_time
+    costs.into(sol)
     sol.wall_time_s = time.perf_counter() - t0
     return sol, first
 
 
 def _copy_state(source: MixedForm, target: MixedForm) -> None:
     """``target`` (same mesh and spaces) at ``source``'s state, load and contact pressures."""
-    target.gfu.vec.data = source.gfu.vec
-    target.restore_multipliers(source.multiplier_state())
+    State(target).restore(State(source).snapshot())
     target.set_load(float(source.load.Get()))
     x = target.gfu.vec.FV().NumPy()
     for pc in target.point_contacts:

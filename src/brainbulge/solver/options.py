@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -182,6 +182,31 @@ class Failure:
 
 
 @dataclass
+class Costs:
+    """What solves cost, added up: assembly and linear-solve time [s] and Krylov iterations
+    (0 with a direct solver). The one place where the costs of several solves (the stages of
+    mesh sequencing, the steps of the contrast path, the meshes of rezoning) are summed."""
+
+    assembly_time_s: float = 0.0
+    solve_time_s: float = 0.0
+    linear_iterations: int = 0
+
+    def add(self, sol: Solution | Costs) -> Costs:
+        """``self`` plus the costs of ``sol``."""
+        self.assembly_time_s += sol.assembly_time_s
+        self.solve_time_s += sol.solve_time_s
+        self.linear_iterations += sol.linear_iterations
+        return self
+
+    def into(self, sol: Solution) -> Solution:
+        """``sol`` with these costs."""
+        sol.assembly_time_s = self.assembly_time_s
+        sol.solve_time_s = self.solve_time_s
+        sol.linear_iterations = self.linear_iterations
+        return sol
+
+
+@dataclass
 class Solution:
     """The last converged state, and how it was reached.
 
@@ -207,6 +232,8 @@ class Solution:
     failure: Failure | None = None  # set when Newton diverged at the smallest load step
     note: str = ""  # why the ramp stopped otherwise (stop hooks, an equilibration)
     context: str = ""  # appended in parentheses (e.g. a rezoning that failed)
+    #: every Newton solve of this solve, in order (:class:`~brainbulge.solver.newton.NewtonResult`)
+    newton_results: list[Any] = field(default_factory=list)
 
     @property
     def swelling_reached(self) -> float:

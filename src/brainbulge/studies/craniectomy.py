@@ -185,9 +185,7 @@ def solve_brain(
                 log.info("  no convergence from the start state (%s): ramping the load",
                          sol.message)
                 solver.release_linear_solver()
-                form.gfu.vec[:] = 0.0
-                form.restore_multipliers([np.zeros_like(v) for v in form.multiplier_state()])
-                form.set_load(0.0)
+                solver.state.reset()
         if started is not True:
             solver = NewtonSolver(form, options)
             sol = solver.solve()

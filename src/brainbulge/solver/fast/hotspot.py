@@ -61,7 +61,8 @@ class RelaxationRecord:
 
 
 class HotspotRelaxation:
-    """Local Newton on the residual hotspot of a :class:`NewtonSolver`'s MINI form."""
+    """Local Newton on the residual hotspot of a MINI form's equations
+    (:class:`~brainbulge.solver.equations.MixedEquations`)."""
 
     def __init__(self, solver, share: float = 0.5, max_vertices: int = 16, rings: int = 2,
                  max_iterations: int = 30) -> None:
@@ -190,8 +191,7 @@ class HotspotRelaxation:
         patch = problem.patch
         self.last_dofs = problem.dofs
         X = x.FV().NumPy()
-        x_saved = X.copy()
-        lam_saved = [pc.lam.copy() for pc in pcs]
+        saved = s.state.snapshot()
         res_saved, compl_saved = s.res.FV().NumPy().copy(), s.contact.complementarity
         its = problem.solve(X, target=0.01 * norm, max_iterations=self.max_iterations)
         new = s.scaled_norm(s.residual(x))
@@ -206,9 +206,8 @@ class HotspotRelaxation:
                   "" if kept else ", not kept")
         if kept:
             return new
-        X[:] = x_saved  # and the residual at it, without evaluating it again
-        for pc, lam in zip(pcs, lam_saved, strict=True):
-            pc.lam = lam
+        s.state.restore(saved)  # and the residual at it, without evaluating it again
+        for pc in pcs:
             pc.update(X)
         s.res.FV().NumPy()[:] = res_saved
         s.contact.complementarity = compl_saved

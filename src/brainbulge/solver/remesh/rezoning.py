@@ -37,8 +37,7 @@ from brainbulge.geometry.rezone import (
 from brainbulge.model.problem import Problem
 from brainbulge.solver.contact.points import edge_bubble_midpoint_value
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import Newton
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
 from brainbulge.solver.remesh.sequencing import carry_contact_pressures
 
@@ -109,18 +108,18 @@ def solve_with_rezoning(
                         rezoning.corners, rezoning.rim_points, rezoning.h_rim)
             new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
             transfer_state(form, new, rz)
-            new_solver = Newton(
+            new_solver = NewtonSolver(
                 new, dataclasses.replace(options, max_iterations=EQUILIBRATION_ITERATIONS))
             new.set_load(sol.load)
             # equilibrate the carried-over state on the new mesh before the ramp goes on
-            r0 = new_solver.scaled_norm(new_solver.residual(new.gfu.vec))
-            ok, its, norm = new_solver.newton(new.gfu.vec)
+            res = new_solver.newton()
+            its = res.iterations
             log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
-                     sol.load, r0, norm, its)
-            if not ok:
+                     sol.load, res.residuals[0], res.norm, its)
+            if not res.converged:
                 raise ConvergenceError(f"the carried-over state did not equilibrate "
-                                       f"(|R| = {norm:.2e} after {its} iterations: "
-                                       f"{new_solver.failure_reason})")
+                                       f"(|R| = {res.norm:.2e} after {its} iterations: "
+                                       f"{res.detail})")
         except (ConvergenceError, RuntimeError, NgException) as exc:
             # the old mesh keeps the last converged state; go on there without rezoning
             failed = f"rezoning at load {sol.load:.4f} failed: {exc}"
@@ -165,10 +164,8 @@ def _merged(a: Solution, b: Solution) -> Solution:
     """``b`` continuing ``a`` (steps, counts and times added)."""
     b.steps = a.steps + b.steps
     b.rejected_steps += a.rejected_steps
-    b.assembly_time_s += a.assembly_time_s
-    b.solve_time_s += a.solve_time_s
-    b.linear_iterations += a.linear_iterations
-    return b
+    b.newton_results = a.newton_results + b.newton_results
+    return Costs().add(b).add(a).into(b)
 
 
 def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:

@@ -56,7 +56,7 @@ from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordina
 from brainbulge.geometry.rezone import vertex_values
 from brainbulge.solver.contrast import equilibrate_through_contrast
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
 
 log = logging.getLogger("brainbulge")
@@ -232,10 +232,8 @@ def solve_sequenced(
     else:
         log.warning("  the coarse mesh stopped at load %.4f (%s); ramping the load on the "
                     "fine mesh from Js = 1", csol.load, csol.message)
-    fine.gfu.vec[:] = 0.0
-    fine.restore_multipliers([np.zeros_like(v) for v in fine.multiplier_state()])
-    fine.set_load(0.0)
     solver = NewtonSolver(fine, options)
+    solver.state.reset()
     sol = solver.solve()
     solver.release_linear_solver()
     return _with_coarse_costs(sol, csol, t0), record
@@ -245,7 +243,4 @@ def _with_coarse_costs(sol: Solution, coarse: Solution, t0: float) -> Solution:
     """``sol`` with the wall time since ``t0`` and the coarse stage's assembly, linear-solve
     and Krylov counts added (its Newton iterations stay the fine mesh's own)."""
     sol.wall_time_s = time.perf_counter() - t0
-    sol.assembly_time_s += coarse.assembly_time_s
-    sol.solve_time_s += coarse.solve_time_s
-    sol.linear_iterations += coarse.linear_iterations
-    return sol
+    return Costs().add(sol).add(coarse).into(sol)
