@@ -32,7 +32,7 @@ def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
     dofs = list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
     x = coarse.gfu.vec
     x.FV().NumPy()[dofs] += 0.02 * coarse.h
-    site = solver.residual_site(x)
+    site = solver.equations.residual_site(x)
     np.testing.assert_allclose(site, X[v] + x.FV().NumPy()[dofs], atol=1e-12)
 
 

@@ -35,10 +35,14 @@ from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonResult, StepLimit, newton
 from brainbulge.solver.options import Costs, Failure, Solution, SolverOptions, StepRecord
+from brainbulge.solver.state import Snapshot
 
 log = logging.getLogger("brainbulge")
 
 FULL = 1 - 1e-12  # a load at least this is full load
+
+#: the predictor: the last accepted increment of ``x`` and its load step ``dt``
+Predictor = tuple[ngs.BaseVector, float]
 
 
 class NewtonSolver:
@@ -73,39 +77,15 @@ class NewtonSolver:
         check_feasible(self.equations)
         form, opt, state = self.form, self.opt, self.state
         start = time.perf_counter()
-        x = state.x
         sol = Solution(form=form, load=0.0, converged=False)
-        t, dt = opt.start_load, 1.0 / opt.steps
-        last_increment: ngs.BaseVector | None = None
-        last_dt = 0.0
-        if opt.checkpoint is not None:
-            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, form, sol)
-            if resumed is not None:
-                t, dt, last_increment, last_dt = resumed
-                sol.resumed_from = t
+        t, dt, predictor = self._start(sol)
         last = state.snapshot()  # the last converged state
         bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
         bar.update(round(100 * t))
         try:
             while t < FULL:
                 dt = min(dt, 1 - t)
-                form.set_load(t + dt)
-                if last_increment is not None:  # predictor: extrapolate the last increment
-                    x.data = last.x + (dt / last_dt) * last_increment
-                    form.set_load(t + dt)  # exact prescribed values over the predictor
-                final = t + dt >= FULL
-                tol = (opt.tolerance if final
-                       else max(opt.tolerance, opt.intermediate_tolerance))
-                res = self.newton(tol)
-                sol.newton_results.append(res)
-                its = res.iterations
-                if not res.converged and last_increment is not None:
-                    # retry without the predictor (the failed attempt's contact pressures)
-                    state.restore(last, multipliers=False)
-                    form.set_load(t + dt)
-                    res = self.newton(tol)
-                    sol.newton_results.append(res)
-                    its += res.iterations
+                res, its = self._attempt(t + dt, dt, last, predictor, sol)
                 if not res.converged:
                     sol.rejected_steps += 1
                     state.restore(last)
@@ -123,9 +103,9 @@ class NewtonSolver:
                         break
                     continue
                 pen = self.equations.max_penetration() if form.point_contacts else 0.0
-                increment = x.CreateVector()
-                increment.data = x - last.x
-                last_increment, last_dt = increment, dt
+                increment = state.x.CreateVector()
+                increment.data = state.x - last.x
+                predictor = (increment, dt)
                 t += dt
                 last = state.snapshot()
                 bar.update(round(100 * t) - bar.n)
@@ -134,8 +114,8 @@ class NewtonSolver:
                 if its <= 4:
                     dt *= 1.5
                 if opt.checkpoint is not None:
-                    restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, x, t, dt,
-                                  last_increment, last_dt, sol)
+                    restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, state.x, t,
+                                  dt, increment, predictor[1], sol)
                 if opt.stop_when is not None and t < FULL and opt.stop_when():
                     sol.stopped_early = True
                     sol.note = f"stopped at load {t:.4f} (stop_when)"
@@ -145,8 +125,46 @@ class NewtonSolver:
         finally:
             bar.close()
             state.restore(last)
+            form.load.Set(t)
         sol.load = t
         return finished(self.equations, sol, start)
+
+    def _start(self, sol: Solution) -> tuple[float, float, Predictor | None]:
+        """Where the ramp starts: ``(t, dt, predictor)`` from ``start_load`` and ``steps``,
+        or from the restart file (which also fills ``sol``'s steps)."""
+        opt = self.opt
+        if opt.checkpoint is not None:
+            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, self.form, sol)
+            if resumed is not None:
+                t, dt, increment, last_dt = resumed
+                sol.resumed_from = t
+                return t, dt, (increment, last_dt)
+        return opt.start_load, 1.0 / opt.steps, None
+
+    def _attempt(self, t: float, dt: float, last: Snapshot, predictor: Predictor | None,
+                 sol: Solution) -> tuple[NewtonResult, int]:
+        """Newton at load ``t`` (a step ``dt`` on) from the predicted state, extrapolating
+        the last increment, ``x_pred = x_last + (dt / dt_last) increment``, and, if that
+        fails, once more from the last converged state ``last`` (its ``x`` at the new load's
+        prescribed values, with the failed attempt's contact pressures). Returns the last
+        Newton result and the iterations of both."""
+        form, opt, state = self.form, self.opt, self.state
+        form.set_load(t)
+        if predictor is not None:
+            increment, last_dt = predictor
+            state.x.data = last.x + (dt / last_dt) * increment
+            form.set_load(t)  # exact prescribed values over the predictor
+        tol = opt.tolerance if t >= FULL else max(opt.tolerance, opt.intermediate_tolerance)
+        res = self.newton(tol)
+        sol.newton_results.append(res)
+        its = res.iterations
+        if not res.converged and predictor is not None:
+            state.restore(last, multipliers=False)
+            form.set_load(t)
+            res = self.newton(tol)
+            sol.newton_results.append(res)
+            its += res.iterations
+        return res, its
 
     def equilibrate(self) -> Solution:
         """Newton at the form's current load from its current state (one carried over
