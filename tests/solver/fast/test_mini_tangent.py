@@ -121,7 +121,7 @@ def test_newton_takes_the_same_path_with_either_tangent() -> None:
 def test_other_forms_keep_ngsolves_tangent() -> None:
     assert not applies(MixedForm(_problem(curved=True), element="mini"))
     assert not applies(MixedForm(_problem(), element="taylor-hood"))
-    assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).closed is None
+    assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).equations.closed is None
 
 
 
