@@ -87,6 +87,7 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
     from brainbulge.solver.linear.krylov import BlockKrylovSolver
     from brainbulge.solver.linear.layout import displacement_layout
+    from brainbulge.solver.options import KrylovOptions
 
     info: dict = {}
     path = cache / f"brain_{tets}" / "brain.npz"
@@ -101,7 +102,7 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     problem = Problem(full.mesh, full.materials, full.swelling, clamped="base|skull")
     form = MixedForm(problem, element="mini", compile_energy=True)
     ns = NewtonSolver(form, SolverOptions(tolerance=1e-8))
-    ns.linear = BlockKrylovSolver.from_form(form, rtol=1e-6, maxiter=2000)
+    ns.linear = BlockKrylovSolver.from_form(form, KrylovOptions(max_iterations=2000), rtol=1e-6)
     x = form.gfu.vec
     t0 = time.perf_counter()
     steps = max(1, round(load / 0.25))
@@ -183,6 +184,7 @@ def worker(folder: Path, variant: str, rtol: float) -> dict:
     from brainbulge.solver.linear.direct import PardisoSolver
     from brainbulge.solver.linear.krylov import BlockKrylovSolver
     from brainbulge.solver.linear.layout import DisplacementLayout
+    from brainbulge.solver.options import KrylovOptions
 
     d = np.load(folder / "system.npz")
     systems = [(sp.load_npz(folder / f"K{n}.npz").tocsr(), d[f"rhs{n}"]) for n in "12"]
@@ -202,7 +204,7 @@ def worker(folder: Path, variant: str, rtol: float) -> dict:
         cls = (BlockKrylovSolver if mass is None
                else mass_schur_solver(sp.load_npz(folder / f"mass_{mass}.npz")))
         lay = DisplacementLayout(d["coords"], d["vertex"], d["component"])
-        solver = cls(d["is_u"], lay, rtol=rtol, maxiter=3000)
+        solver = cls(d["is_u"], lay, KrylovOptions(max_iterations=3000), rtol=rtol)
         K, r = systems[0]
         t0 = time.perf_counter()
         solver.setup(K)

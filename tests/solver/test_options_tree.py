@@ -22,7 +22,8 @@ LEAVES = [(g.name, type(getattr(SolverOptions(), g.name)), f)
 
 
 def test_the_tree_has_the_continuations_groups() -> None:
-    assert {g.name for g in GROUPS} >= {"contrast", "sequencing", "rezoning", "warm_start"}
+    assert {g.name for g in GROUPS} >= {"contrast", "sequencing", "rezoning", "warm_start",
+                                        "krylov", "hotspot"}
     for g in GROUPS:
         group = getattr(SolverOptions(), g.name)
         with pytest.raises(dataclasses.FrozenInstanceError):

@@ -38,9 +38,8 @@ class MixedEquations:
         options = options or SolverOptions()
         self.form = form
         self.state = State(form)  # x, lambda, t: what a solve changes
-        krylov = ({} if options.krylov_max_iterations is None
-                  else {"maxiter": options.krylov_max_iterations})
-        self.linear: LinearSolver = make_linear_solver(options.linear_solver, form, **krylov)
+        self.linear: LinearSolver = make_linear_solver(options.linear_solver, form,
+                                                       options.krylov)
         self.closed = None  # the closed-form residual and tangent, where they apply
         if form.element == "mini" and options.closed_form:
             # (Numba, ~0.5 s: imported only where it may apply)

@@ -1,7 +1,9 @@
 """What a solve is asked to do (:class:`SolverOptions`) and what it returns (:class:`Solution`).
 
-The continuations' tunables are frozen groups of :class:`SolverOptions` (``options.contrast``,
-``options.sequencing``, ``options.rezoning``, ``options.warm_start``), each field declared
+The continuations', the Krylov solver's and the hotspot relaxation's tunables are frozen
+groups of :class:`SolverOptions` (``options.contrast``, ``options.sequencing``,
+``options.rezoning``, ``options.warm_start``, ``options.krylov``, ``options.hotspot``), each
+field declared
 once with :func:`~brainbulge.model.options.option`: default, unit, range and the reason for
 the default; a group checks its ranges when built.
 
@@ -122,6 +124,44 @@ class WarmStartOptions(OptionGroup):
         unit=" iterations", range=(1, 100_000))
 
 
+@dataclass(frozen=True)
+class HotspotOptions(OptionGroup):
+    """The hotspot relaxation between Newton iterations
+    (:mod:`brainbulge.solver.fast.hotspot`; on or off: ``hotspot_relaxation``)."""
+
+    share: float = option(
+        0.5, "the hotspot: the fewest vertices holding this share of the scaled |R|^2 (at "
+        "1.40M tets 90-100 % sat at three CSF vertices of the flap rim)", unit=RATIO,
+        range=(0.01, 1.0))
+    max_vertices: int = option(
+        16, "a hotspot of more vertices is left to Newton (a residual spread over the body "
+        "is Newton's job); no other value measured", unit=" vertices", range=(1, 100_000))
+    rings: int = option(
+        2, "rings of neighbours solved with the hotspot (with them 4 fine iterations instead "
+        "of 7 at 1.40M tets; no other value measured)", unit=" rings", range=(0, 10))
+    max_iterations: int = option(
+        30, "Newton iterations of one local solve (a cap: the result is kept only when the "
+        "global residual falls); no other value measured", unit=" iterations",
+        range=(1, 1000))
+
+
+@dataclass(frozen=True)
+class KrylovOptions(OptionGroup):
+    """GMRES with AMG blocks (:class:`~brainbulge.solver.linear.krylov.BlockKrylovSolver`)."""
+
+    max_iterations: int = option(
+        1000, "GMRES iterations per linear solve, all restarts included (converging solves on "
+        "the 111k-tet template take <= ~170)", unit=" iterations", range=(1, 1_000_000))
+    restart: int = option(
+        200, "GMRES restart length (basis vectors kept: 1.7 GB at 1.08M unknowns); with 100 "
+        "the 1.40M-tet brain's fine-stage tangent stalled at 5.6e-2 after 200 iterations, it "
+        "converges in 157 without a restart", unit=" vectors", range=(1, 100_000))
+    refresh_factor: float = option(
+        1.5, "rebuild the AMG hierarchies when a solve takes more than this times the "
+        "iterations of the first solve after the last set-up; no other value measured",
+        unit=RATIO, range=(1.0, 1e3))
+
+
 @dataclass
 class SolverOptions:
     """Everything a caller may tune in a solve: the load ramp's, Newton's and the linear
@@ -201,9 +241,10 @@ class SolverOptions:
     #: a failed Krylov solve is retried once, tighter, with a fresh preconditioner (False:
     #: the Newton solve fails at once, e.g. from a start state that a ramp can replace)
     retry_linear: bool = True
-    #: GMRES iterations per Krylov solve (None: the Krylov solver's default,
-    #: :class:`~brainbulge.solver.linear.krylov.BlockKrylovSolver`)
-    krylov_max_iterations: int | None = None
+    #: the Krylov solver's budget, restart and AMG refresh (frozen group)
+    krylov: KrylovOptions = field(default_factory=KrylovOptions)
+    #: the hotspot relaxation's hotspot, patch and local Newton (frozen group)
+    hotspot: HotspotOptions = field(default_factory=HotspotOptions)
 
     # --- the continuations (frozen groups: ``dataclasses.replace`` a group to change it) --
     contrast: ContrastOptions = field(default_factory=ContrastOptions)

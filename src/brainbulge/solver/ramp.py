@@ -57,8 +57,9 @@ class NewtonSolver:
         self.equations = MixedEquations(form, self.opt)
         self.state = self.equations.state
         #: local solves at residual hotspots (MINI; option ``hotspot_relaxation``)
-        self.relaxation = (HotspotRelaxation(self.equations) if self.opt.hotspot_relaxation
-                           and HotspotRelaxation.applies(form) else None)
+        self.relaxation = (HotspotRelaxation(self.equations, self.opt.hotspot)
+                           if self.opt.hotspot_relaxation and HotspotRelaxation.applies(form)
+                           else None)
 
     def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
                limit_step: StepLimit | None = None) -> NewtonResult:

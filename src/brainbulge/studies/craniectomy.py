@@ -179,7 +179,8 @@ def solve_brain(
             solver = NewtonSolver(form, dataclasses.replace(
                 options, max_iterations=options.warm_start.max_iterations,
                 carried_curvature_tolerance=np.inf, retry_linear=False,
-                krylov_max_iterations=options.warm_start.krylov_iterations))
+                krylov=dataclasses.replace(options.krylov,
+                                           max_iterations=options.warm_start.krylov_iterations)))
             sol = solver.equilibrate()
             started = sol.converged
             if not sol.converged:

@@ -17,6 +17,7 @@ from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 from brainbulge.solver import NewtonSolver, SolverOptions, mixed
 from brainbulge.solver.fast.hotspot import HotspotRelaxation, LocalProblem
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.options import HotspotOptions
 from contact_cases import A, _capped_ball
 
 
@@ -60,7 +61,7 @@ def test_relax_returns_a_displaced_vertex_to_equilibrium(state) -> None:
     x = form.gfu.vec
     v = _displace(form, [0.3, 0.3, 0.3], [0.02, -0.01, 0.015])
     norm = solver.equations.scaled_norm(solver.equations.residual(x))
-    relaxation = HotspotRelaxation(solver.equations, rings=1)
+    relaxation = HotspotRelaxation(solver.equations, HotspotOptions(rings=1))
     assert list(relaxation.hotspot(solver.equations.res.FV().NumPy())) == [v]
     new = relaxation.relax(x, norm)
     assert norm > 1e-2 and new < 1e-3 * norm
@@ -80,7 +81,7 @@ def test_relax_returns_a_displaced_vertex_to_equilibrium(state) -> None:
 
 def _local_problem(form, solver, v: int) -> LocalProblem:
     """The local problem of the patch ``v`` + one ring, its active contact points included."""
-    return HotspotRelaxation(solver.equations, rings=1).local_problem(np.array([v]))
+    return HotspotRelaxation(solver.equations, HotspotOptions(rings=1)).local_problem(np.array([v]))
 
 
 @pytest.mark.parametrize("where", ["interior", "on the skull"])

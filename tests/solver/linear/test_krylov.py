@@ -17,6 +17,7 @@ from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.linear.direct import PardisoSolver
 from brainbulge.solver.linear.krylov import BlockKrylovSolver
 from brainbulge.solver.linear.layout import displacement_layout, free_dofs
+from brainbulge.solver.options import KrylovOptions
 from inclusion_cases import STIFF, _inclusion_problem
 
 # several AMG levels even on this small mesh
@@ -157,7 +158,8 @@ def test_matches_direct_solve(swollen) -> None:
 
 def test_true_residual_check_raises_when_the_budget_is_too_small(swollen) -> None:
     form, _, K, r = swollen
-    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, maxiter=3, amg=AMG)
+    solver = BlockKrylovSolver.from_form(form, KrylovOptions(max_iterations=3), rtol=1e-10,
+                                         amg=AMG)
     with pytest.raises(ConvergenceError, match="relative residual"):
         solver.solve(K, r)
     # a failed solve rebuilds the hierarchy next time; a looser tolerance is met
@@ -190,7 +192,7 @@ def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
         ref = _direct(K, r)
         assert np.linalg.norm(sol - ref) <= 1e-6 * np.linalg.norm(ref)
     # iterations far above those right after the set-up trigger a rebuild, as does refresh()
-    solver.refresh_factor = 0.1
+    solver.refresh_factor = 0.1  # (below the option's range: a rebuild at every solve)
     solver.solve(K2, r1)
     solver.solve(K2, r1)
     assert solver.stats.setups == 2
