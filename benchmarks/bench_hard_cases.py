@@ -237,7 +237,7 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str,
     solver = NewtonSolver(form, SolverOptions(steps=case.steps, tolerance=tolerance,
                                               hotspot_relaxation=not edges))
     if edges:
-        solver.contact.moving[-1][:] = True
+        solver.equations.contact.moving[-1][:] = True
 
     def release(x) -> int:
         n = 0

@@ -12,9 +12,9 @@ Cases (``RUNS``; each a flag of ``bench_hard_cases.py``):
   swelling) with the flap's cut edge rounded by 2 mm instead of 8, GMRES + AMG, on the
   100k-tet template: ``ramped`` (the load ramped on that mesh) and ``sequenced-no-contrast``
   (mesh sequencing from the 25k-tet template, ``--coarse-mesh``, with the fine stage's
-  Newton directly on the model: ``CONTRAST_START`` set to infinity, so the contrast path is
-  one step; when that stage fails, the state it stalled at is reported instead of the
-  product's fall-back ramp on the fine mesh).
+  Newton directly on the model: ``SolverOptions.contrast.start`` set to its upper bound,
+  above any model's contrast, so the contrast path is one step; when that stage fails, the
+  state it stalled at is reported instead of the product's fall-back ramp on the fine mesh).
 - ``taylor-hood`` (``--taylor-hood``): the six scenarios of ``study`` with ``--element
   taylor-hood`` on the same 21k-tet mesh (``--th-scenarios`` picks some).
 - ``long`` (``--long``): Taylor-Hood at 175k tets (GMRES) and the default scenario on the
@@ -41,6 +41,8 @@ import sys
 import time
 from pathlib import Path
 
+from brainbulge.solver import SolverOptions
+from brainbulge.solver.options import ContrastOptions
 from brainbulge.studies.craniectomy import SCENARIOS
 from brainbulge.studies.suites import PAPER_TETS
 
@@ -255,34 +257,39 @@ def no_contrast_main(argv: list[str]) -> int:
     return main(argv)
 
 
+def model_contrast_alone(options: SolverOptions) -> SolverOptions:
+    """``options`` whose contrast path starts at the largest start its range allows, above
+    any model's contrast: the path is the model's contrast alone."""
+    start = next(f for f in dataclasses.fields(ContrastOptions) if f.name == "start")
+    return dataclasses.replace(options, contrast=dataclasses.replace(
+        options.contrast, start=start.metadata["range"][1]))
+
+
 def without_contrast_path() -> None:
     """Make mesh sequencing's fine stage Newton on the model itself (no contrast path);
     when it fails, its stalled state and record become the solution (no fall-back ramp on
     the fine mesh)."""
-    from brainbulge.solver import contrast
     from brainbulge.solver.remesh import sequencing as seq
+    from brainbulge.solver.state import State
 
-    contrast.CONTRAST_START = math.inf  # the path: the model's contrast alone
     stalled: dict[int, tuple] = {}
     equilibrate = seq.equilibrate_through_contrast
 
     def fine_stage(form, options, start):
-        sol, first = equilibrate(form, options, start)
+        sol, first = equilibrate(form, model_contrast_alone(options), start)
         if not sol.converged:
-            stalled[id(form)] = (sol, form.gfu.vec.FV().NumPy().copy(),
-                                 [v.copy() for v in form.multiplier_state()])
+            stalled[id(form)] = (sol, State(form).snapshot())
         return sol, first
 
     class NoFallback(seq.NewtonSolver):
         def solve(self):
             if id(self.form) not in stalled:
                 return super().solve()
-            sol, x, lam = stalled.pop(id(self.form))
-            self.form.gfu.vec.FV().NumPy()[:] = x
-            self.form.restore_multipliers(lam)
+            sol, snap = stalled.pop(id(self.form))
+            self.state.restore(snap)
             self.form.set_load(sol.load)
             for pc in self.form.point_contacts:
-                pc.update(x)
+                pc.update(self.form.gfu.vec.FV().NumPy())
             return sol
 
     seq.equilibrate_through_contrast = fine_stage

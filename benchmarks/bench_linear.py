@@ -87,6 +87,7 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
     from brainbulge.solver.linear.krylov import BlockKrylovSolver
     from brainbulge.solver.linear.layout import displacement_layout
+    from brainbulge.solver.options import KrylovOptions
 
     info: dict = {}
     path = cache / f"brain_{tets}" / "brain.npz"
@@ -101,13 +102,13 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     problem = Problem(full.mesh, full.materials, full.swelling, clamped="base|skull")
     form = MixedForm(problem, element="mini", compile_energy=True)
     ns = NewtonSolver(form, SolverOptions(tolerance=1e-8))
-    ns.linear = BlockKrylovSolver.from_form(form, rtol=1e-6, maxiter=2000)
+    ns.linear = BlockKrylovSolver.from_form(form, KrylovOptions(max_iterations=2000), rtol=1e-6)
     x = form.gfu.vec
     t0 = time.perf_counter()
     steps = max(1, round(load / 0.25))
     for k in range(1, steps + 1):
         form.set_load(load * k / steps)
-        ok, _, _ = ns.newton(x)
+        ok = ns.newton().converged
         if not ok:
             raise RuntimeError(f"Newton failed at load {load * k / steps}")
     info["state_s"] = time.perf_counter() - t0
@@ -116,13 +117,13 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
 
     def system():
         """The tangent at ``x`` and the bubble-condensed residual (as Newton forms them)."""
-        ns.residual(x)
-        K = ns.tangent(x)
+        ns.equations.residual(x)
+        K = ns.equations.tangent(x)
         rhs = x.CreateVector()
-        rhs.data = ns.res
+        rhs.data = ns.equations.res
         r = rhs.FV().NumPy()
-        if ns.closed is not None:  # the closed-form MINI tangent condenses by itself
-            r[:] += ns.closed.extend_trans(r)
+        if ns.equations.closed is not None:  # the closed-form MINI tangent condenses by itself
+            r[:] += ns.equations.closed.extend_trans(r)
         else:
             rhs.data += form.a.harmonic_extension_trans * rhs
         return K, rhs
@@ -130,16 +131,16 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     t0 = time.perf_counter()
     K1, rhs1 = system()
     info["assembly_s"] = time.perf_counter() - t0
-    dx = ns.newton_direction(x)  # one Newton step: the next tangent
+    dx = ns.equations.newton_direction(x)  # one Newton step: the next tangent
     if isinstance(dx, tuple):  # (dx, contact multiplier steps)
         dx = dx[0]
     x.data -= dx
     K2, rhs2 = system()
-    free = ns.free
+    free = ns.equations.free
     lay = displacement_layout(form, free)
     mass_w = pressure_schur_mass(form, free)
     mass_u = pressure_schur_mass(form, free, weighted=False)
-    arrays = {"is_u": ns.is_u_free, "coords": lay.coords, "vertex": lay.vertex,
+    arrays = {"is_u": ns.equations.is_u_free, "coords": lay.coords, "vertex": lay.vertex,
               "component": lay.component}
     for name, K, rhs in (("1", K1, rhs1), ("2", K2, rhs2)):
         arrays[f"rhs{name}"] = rhs.FV().NumPy()[free]
@@ -148,7 +149,7 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
     sp.save_npz(out / "mass_weighted.npz", mass_w)
     sp.save_npz(out / "mass_unweighted.npz", mass_u)
     info["dofs"] = int(K1.shape[0])
-    info["dofs_u"] = int(ns.is_u_free.sum())
+    info["dofs_u"] = int(ns.equations.is_u_free.sum())
     info["nnz"] = int(K1.nnz)
     return info
 
@@ -183,6 +184,7 @@ def worker(folder: Path, variant: str, rtol: float) -> dict:
     from brainbulge.solver.linear.direct import PardisoSolver
     from brainbulge.solver.linear.krylov import BlockKrylovSolver
     from brainbulge.solver.linear.layout import DisplacementLayout
+    from brainbulge.solver.options import KrylovOptions
 
     d = np.load(folder / "system.npz")
     systems = [(sp.load_npz(folder / f"K{n}.npz").tocsr(), d[f"rhs{n}"]) for n in "12"]
@@ -202,7 +204,7 @@ def worker(folder: Path, variant: str, rtol: float) -> dict:
         cls = (BlockKrylovSolver if mass is None
                else mass_schur_solver(sp.load_npz(folder / f"mass_{mass}.npz")))
         lay = DisplacementLayout(d["coords"], d["vertex"], d["component"])
-        solver = cls(d["is_u"], lay, rtol=rtol, maxiter=3000)
+        solver = cls(d["is_u"], lay, KrylovOptions(max_iterations=3000), rtol=rtol)
         K, r = systems[0]
         t0 = time.perf_counter()
         solver.setup(K)

@@ -68,17 +68,24 @@ def test_peak_memory_is_read_from_gnu_time():
 
 
 def test_without_contrast_path_the_fine_stage_is_one_step_on_the_model(monkeypatch):
-    from brainbulge.solver import contrast
+    from brainbulge.solver import SolverOptions, contrast
     from brainbulge.solver.remesh import sequencing
 
-    for module, name in ((contrast, "CONTRAST_START"), (sequencing, "NewtonSolver"),
-                         (sequencing, "equilibrate_through_contrast")):
-        monkeypatch.setattr(module, name, getattr(module, name))  # restored afterwards
+    for name in ("NewtonSolver", "equilibrate_through_contrast"):
+        monkeypatch.setattr(sequencing, name, getattr(sequencing, name))  # restored afterwards
     materials = {r: SimpleNamespace(shear_modulus=mu)
                  for r, mu in (("white", 666.0), ("gray", 333.0), ("csf", 33.3))}
-    assert len(contrast.contrast_path(materials)) == 3
+    options = SolverOptions()
+    assert len(contrast.contrast_path(materials, options.contrast)) == 3
+    alone = h3.model_contrast_alone(options).contrast
+    assert contrast.contrast_path(materials, alone) == [pytest.approx(20.0)]
+    seen = []
+    monkeypatch.setattr(sequencing, "equilibrate_through_contrast",
+                        lambda form, opts, start: seen.append(opts) or (SimpleNamespace(
+                            converged=True), None))
     h3.without_contrast_path()
-    assert contrast.contrast_path(materials) == [pytest.approx(20.0)]
+    sequencing.equilibrate_through_contrast("form", options, None)
+    assert seen[0].contrast == alone  # the fine stage gets the path of one step
     assert issubclass(sequencing.NewtonSolver, contrast.NewtonSolver)
 
 

@@ -190,7 +190,7 @@ def test_noslip_opening_stays_out_of_the_skull(noslip_rigid) -> None:
     x = q(ngs.CF((ngs.x, ngs.y)) + form.u)[on_opening]
     gap, _ = case.obstacle.gap_and_normal(x)
     assert gap.min() > -1e-2 * case.R  # between contact points: ~h^2 / edge radius
-    assert solver.max_penetration() < 1e-8 * case.R  # at the contact points
+    assert solver.equations.max_penetration() < 1e-8 * case.R  # at the contact points
     assert np.any(gap < 1e-6 * case.R)  # and it does touch the cut edge
 
 
@@ -213,7 +213,7 @@ def test_sliding_contact(sliding) -> None:
     motion)."""
     case, problem, form, solver, sol = sliding
     assert sol.converged
-    assert solver.max_penetration() < 1e-4 * case.R
+    assert solver.equations.max_penetration() < 1e-4 * case.R
     mesh = problem.mesh
     q = quadrature_points(mesh, order=4, boundary=True)
     skull_part = q(mesh.BoundaryCF({"skull": 1}, default=0)) > 0.5

@@ -14,16 +14,13 @@ import pytest
 from brainbulge.materials.ogden import Ogden
 from brainbulge.model.brain import tissue_materials
 from brainbulge.solver import NewtonSolver, SolverOptions
-from brainbulge.solver.contrast import (
-    CONTRAST_START,
-    CONTRAST_STEP,
-    capped_materials,
-    contrast,
-    contrast_path,
-)
+from brainbulge.solver.contrast import capped_materials, contrast, contrast_path
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.options import ContrastOptions
 from brainbulge.solver.remesh.sequencing import solve_sequenced
 from contact_cases import GRAY, A, _capped_ball
+
+PATH = ContrastOptions()
 
 SOFT = GRAY.scaled(1 / 20)
 
@@ -31,19 +28,19 @@ SOFT = GRAY.scaled(1 / 20)
 @pytest.mark.parametrize("preset", ["paper", "paper-pa"])
 def test_the_brains_path_goes_from_the_parenchymas_contrast_to_the_csfs(preset) -> None:
     mats = tissue_materials(preset)
-    path = contrast_path(mats)
-    assert path[0] == CONTRAST_START
+    path = contrast_path(mats, PATH)
+    assert path[0] == PATH.start
     assert path[-1] == pytest.approx(mats["white"].shear_modulus / mats["csf"].shear_modulus)
     assert 19 < path[-1] < 21  # white over CSF
     steps = np.diff(np.log(path))
-    assert np.all(steps > 0) and np.all(steps <= math.log(CONTRAST_STEP) + 1e-12)
+    assert np.all(steps > 0) and np.all(steps <= math.log(PATH.factor) + 1e-12)
     assert len(path) == 3
 
 
 def test_a_problem_of_low_contrast_takes_one_step() -> None:
-    assert contrast_path({"a": GRAY, "b": GRAY}) == [1.0]
+    assert contrast_path({"a": GRAY, "b": GRAY}, PATH) == [1.0]
     mats = {"a": GRAY, "b": GRAY.scaled(0.6)}
-    assert contrast_path(mats) == [pytest.approx(1 / 0.6)]
+    assert contrast_path(mats, PATH) == [pytest.approx(1 / 0.6)]
 
 
 def test_capped_materials_raise_the_soft_ones_only() -> None:
@@ -78,7 +75,7 @@ def test_the_path_ends_at_the_models_equilibrium() -> None:
     sol, record = solve_sequenced(coarse, fine, options)
     assert sol.converged and record.fine_converged
     # the path's Newton solves at full load, one per contrast, in one record (not load steps)
-    assert len(contrast_path(fine.problem.materials)) == 3
+    assert len(contrast_path(fine.problem.materials, PATH)) == 3
     assert [s.load for s in sol.steps] == [1.0]
     assert sol.newton_iterations >= 3
     assert record.initial_residual > options.tolerance
@@ -92,7 +89,8 @@ def test_a_step_without_progress_ends_the_path_and_the_ramp_takes_over() -> None
     """A contrast step whose residual does not fall fast enough gives up (here: a
     requirement no Newton iteration meets); mesh sequencing then ramps the fine mesh's load
     and still reaches the model's equilibrium."""
-    options = SolverOptions(steps=2, contrast_progress=(1, 1e-30))
+    options = SolverOptions(steps=2, contrast=ContrastOptions(progress_iterations=1,
+                                                                progress_factor=1e-30))
     coarse, fine = _soft_matrix_forms()
     sol, record = solve_sequenced(coarse, fine, options)
     assert record.coarse_converged and not record.fine_converged

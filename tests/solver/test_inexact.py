@@ -56,5 +56,5 @@ def test_a_failed_line_search_on_a_loose_krylov_direction_retries_tighter() -> N
     ns = NewtonSolver(form, SolverOptions(steps=1, linear_solver="krylov", eta_max=0.5))
     sol = ns.solve()
     assert sol.converged
-    assert ns.tightened_solves >= 1
-    assert len(ns.history) == 1  # one Newton solve: no load-step cut
+    assert sol.newton_results[0].tightened >= 1
+    assert len(sol.newton_results) == 1  # one Newton solve: no load-step cut

@@ -23,7 +23,7 @@ def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
     V = coarse.fes.components[0]
     X = _coords(coarse.mesh)
     free = np.zeros(coarse.fes.ndof, dtype=bool)
-    free[solver.free] = True
+    free[solver.equations.free] = True
     # a free interior vertex, far from the points of the contact boundary
     inner = [v for v in range(coarse.mesh.nv)
              if all(free[d] for d in V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
@@ -32,7 +32,7 @@ def test_residual_site_is_the_vertex_pushed_out_of_equilibrium() -> None:
     dofs = list(V.GetDofNrs(ngs.NodeId(ngs.VERTEX, v)))
     x = coarse.gfu.vec
     x.FV().NumPy()[dofs] += 0.02 * coarse.h
-    site = solver.residual_site(x)
+    site = solver.equations.residual_site(x)
     np.testing.assert_allclose(site, X[v] + x.FV().NumPy()[dofs], atol=1e-12)
 
 

@@ -10,6 +10,7 @@ from brainbulge.errors import InfeasibleError, InputError
 from brainbulge.materials import MooneyRivlin, Ogden
 from brainbulge.model import Problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions, solve
+from brainbulge.solver.newton import Reason
 
 GRAY = MooneyRivlin(0.28, 333.0)
 SYMMETRY = {0: "xmin", 1: "ymin", 2: "zmin"}
@@ -99,19 +100,19 @@ def test_tangent_matches_finite_differences(box2d) -> None:
     problem = Problem(box2d, {"tissue": GRAY}, {"tissue": 1.3}, clamped_components=SYMMETRY)
     form = MixedForm(problem)
     form.set_load(0.7)
-    solver = NewtonSolver(form)
+    eq = NewtonSolver(form).equations
     rng = np.random.default_rng(0)
     x = form.gfu.vec
     x.FV().NumPy()[:] = 0.02 * rng.standard_normal(len(x))
-    K = solver.tangent(x)
+    K = eq.tangent(x)
     v = np.zeros(len(x))
-    v[solver.free] = rng.standard_normal(len(solver.free))
+    v[eq.free] = rng.standard_normal(len(eq.free))
     eps = 1e-6
     xp, xm = x.CreateVector(), x.CreateVector()
     xp.FV().NumPy()[:] = x.FV().NumPy() + eps * v
     xm.FV().NumPy()[:] = x.FV().NumPy() - eps * v
-    fd = (solver.residual(xp) - solver.residual(xm))[solver.free] / (2 * eps)
-    Kv = K @ v[solver.free]
+    fd = (eq.residual(xp) - eq.residual(xm))[eq.free] / (2 * eps)
+    Kv = K @ v[eq.free]
     assert np.linalg.norm(Kv - fd) < 1e-6 * np.linalg.norm(Kv)
 
 
@@ -127,8 +128,9 @@ def test_newton_converges_quadratically() -> None:
     )
     form = MixedForm(problem)
     solver = NewtonSolver(form, SolverOptions(steps=1, tolerance=1e-13))
-    assert solver.solve().converged
-    hist = [h for h in solver.history[0] if h > 1e-12]
+    sol = solver.solve()
+    assert sol.converged
+    hist = [h for h in sol.newton_results[0].residuals if h > 1e-12]
     assert len(hist) >= 4
     # quadratic: log r_{k+1} / log r_k approaches 2 in the last iterations
     rates = [np.log(hist[k + 1]) / np.log(hist[k]) for k in range(len(hist) - 1) if hist[k] < 0.1]
@@ -191,7 +193,7 @@ def _residual_and_tangent(form: MixedForm) -> tuple[np.ndarray, np.ndarray]:
     x = form.gfu.vec
     x.FV().NumPy()[:] = np.random.default_rng(0).normal(scale=1e-3, size=len(x))
     ns = NewtonSolver(form)
-    return ns.residual(x), ns.tangent(x).toarray()
+    return ns.equations.residual(x), ns.equations.tangent(x).toarray()
 
 
 def _assert_same(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> None:
@@ -263,7 +265,7 @@ def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
                                                   intermediate_tolerance=itol))
         sol = solver.solve()
         assert sol.converged
-        finals = [h[-1] for h in solver.history]
+        finals = [r.norm for r in sol.newton_results]
         assert finals[-1] <= 1e-9
         sols.append((sol, solver, form.gfu.vec.FV().NumPy().copy(), finals))
     (tight, _, x_tight, f_tight), (loose, _, x_loose, f_loose) = sols
@@ -293,29 +295,31 @@ def test_an_attempt_that_stagnates_stops_early() -> None:
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 
     case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
-    runs, reasons = {}, {}
+    runs = {}
     for stagnation in (4, 0):
         form = MixedForm(hemidisk_problem(case))
         solver = NewtonSolver(form, SolverOptions(max_iterations=20, stagnation=stagnation))
         rng = np.random.default_rng(0)
 
-        def noisy(x, K=None, guess=None, exact=solver.newton_direction, rng=rng):
-            dx, dlams = exact(x, K, guess)
+        def noisy(x, K=None, guess=None, rtol=None, exact=solver.equations.newton_direction,
+                  rng=rng):
+            dx, dlams, sol = exact(x, K, guess, rtol)
             v = dx.FV().NumPy()
             v *= 1 + 0.05 * rng.standard_normal(v.size)
-            return dx, dlams
+            return dx, dlams, sol
 
-        solver.newton_direction = noisy
+        solver.equations.newton_direction = noisy
         form.set_load(0.5)
-        runs[stagnation] = solver.newton(form.gfu.vec)
-        reasons[stagnation] = solver.failure_reason
-    (ok4, its4, norm4), (ok0, its0, norm0) = runs[4], runs[0]
-    assert not ok4 and not ok0
-    assert its4 == 4 and its0 > 8
-    assert norm0 < norm4  # the short steps did lower the residual, a little
-    assert reasons[4].startswith("stagnated: 4 line-search steps")
-    assert reasons[0] in ("the line search found no step lowering |R|",
-                          "max_iterations = 20 reached")
+        runs[stagnation] = solver.newton()
+    r4, r0 = runs[4], runs[0]
+    assert not r4.converged and not r0.converged
+    assert r4.iterations == 4 and r0.iterations > 8
+    assert r0.norm < r4.norm  # the short steps did lower the residual, a little
+    assert r4.reason is Reason.STAGNATED
+    assert r4.detail.startswith("stagnated: 4 line-search steps")
+    assert r0.reason in (Reason.NO_STEP, Reason.MAX_ITERATIONS)
+    assert r0.detail in ("the line search found no step lowering |R|",
+                         "max_iterations = 20 reached")
 
 
 def test_a_slow_newton_solve_logs_its_iterations(box2d, caplog) -> None:

@@ -269,11 +269,11 @@ def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_pa
     loads = []
     newton = NewtonSolver.newton
 
-    def logged(self, x, *args, **kwargs):
+    def logged(self, *args, **kwargs):
         loads.append(self.form.load.Get())
         if kill and self.form.load.Get() > 0.6:
             raise Killed
-        return newton(self, x, *args, **kwargs)
+        return newton(self, *args, **kwargs)
 
     monkeypatch.setattr(NewtonSolver, "newton", logged)
     config = {"flap": "frontal", "swell": "left", "steps": 2}

@@ -37,6 +37,7 @@ from brainbulge.geometry.brain.flap_fit import (
 )
 from brainbulge.model.brain import CraniectomyCase
 from brainbulge.results.present.plan_report import COLUMNS, pareto_front, recommend
+from brainbulge.solver import SolverOptions
 from brainbulge.studies.plan import plan_cases, run_plan
 from toy_brain import toy_labels
 
@@ -348,7 +349,7 @@ def test_a_start_whose_krylov_solve_fails_ramps_at_once(plan, tmp_path, monkeypa
         return load_state(form, source, _state_key(cases[0], bm))
 
     run = craniectomy.solve_brain(case, tmp_path, brain_mesh=bm, start=start)
-    assert calls[0][1] == craniectomy.START_KRYLOV_ITERATIONS
+    assert calls[0][1] == SolverOptions().warm_start.krylov_iterations
     assert calls[1][0] != calls[0][0]  # the next solve is the ramp's, not a retry
     assert run.started is False and run.sol.converged
 

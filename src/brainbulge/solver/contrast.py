@@ -12,39 +12,32 @@ kappa``,
 
     mu_r(kappa) = max(mu_r, mu_max / kappa)       (c1, c2 or c_i scaled alike: c1/c2 kept),
 
-starting from ``kappa_0 = CONTRAST_START`` (the parenchyma's own contrast, white over gray)
-and multiplying ``kappa`` by ``CONTRAST_STEP`` up to the model's contrast
+starting from ``kappa_0 = ContrastOptions.start`` (the parenchyma's own contrast, white over
+gray) and multiplying ``kappa`` by ``ContrastOptions.factor`` up to the model's contrast
 ``kappa_model = mu_max / mu_min``; every step is Newton at full load from the last
-equilibrium, which must lower the scaled residual by ``SolverOptions.contrast_progress``
-(10x within 3 iterations by default): a healthy step converges quadratically, while the
-1.40M-tet template's last step fell 1.7x in 3 iterations of ~3 minutes each and then
-stagnated. A step that fails ends the path and the caller falls
+equilibrium, which must lower the scaled residual by ``ContrastOptions.progress_factor``
+within ``progress_iterations`` (10x within 3 iterations by default): a healthy step
+converges quadratically, while the 1.40M-tet template's last step fell 1.7x in 3 iterations
+of ~3 minutes each and then stagnated. A step that fails ends the path and the caller falls
 back (mesh sequencing: to the load ramp).
 The last step is the model itself: the state reached is its equilibrium to the solver's
 tolerance, the intermediate materials are only the way there. A problem whose contrast is
-at most ``CONTRAST_START`` takes one step, the plain Newton solve.
+at most ``ContrastOptions.start`` takes one step, the plain Newton solve.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Callable
 
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import ContrastOptions, Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
+from brainbulge.solver.state import State
 
 log = logging.getLogger("brainbulge")
-
-#: the contrast the path starts from: white over gray matter (666 / 333 kPa), the parenchyma's
-#: own, where the 100k-tet template's fine stage converges from the 25k-tet state (4 Newton
-#: iterations with a 2 or 8 mm edge)
-CONTRAST_START = 2.0
-#: growth of the contrast per step (2 -> 6.3 -> 20 for the brain's CSF)
-CONTRAST_STEP = math.sqrt(10.0)
 
 
 def contrast(materials: dict) -> float:
@@ -62,13 +55,13 @@ def capped_materials(materials: dict, kappa: float) -> dict:
             for r, m in materials.items()}
 
 
-def contrast_path(materials: dict) -> list[float]:
-    """The contrasts of the path's steps: ``CONTRAST_START`` times powers of
-    ``CONTRAST_STEP``, ending at the model's (one step when that is not larger)."""
+def contrast_path(materials: dict, path_options: ContrastOptions) -> list[float]:
+    """The contrasts of the path's steps: ``start`` times powers of ``factor``
+    (``path_options``), ending at the model's (one step when that is not larger)."""
     target = contrast(materials)
-    path = [min(CONTRAST_START, target)]
+    path = [min(path_options.start, target)]
     while path[-1] < target * (1 - 1e-12):
-        path.append(min(path[-1] * CONTRAST_STEP, target))
+        path.append(min(path[-1] * path_options.factor, target))
     return path
 
 
@@ -83,13 +76,14 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
     state on the first step's form. The linear solvers' memory is released."""
     t0 = time.perf_counter()
     problem = form.problem
-    path = contrast_path(problem.materials)
+    path = contrast_path(problem.materials, options.contrast)
     target = path[-1]
     kappa = path[0]
     previous: MixedForm | None = None
-    step_options = (dataclasses.replace(options, required_progress=options.contrast_progress)
+    progress = (options.contrast.progress_iterations, options.contrast.progress_factor)
+    step_options = (dataclasses.replace(options, required_progress=progress)
                     if len(path) > 1 else options)
-    records, linear, assembly, solve_time = [], 0, 0.0, 0.0
+    records, costs = [], Costs()
     first: float | None = None
     while True:
         step_form = form if kappa >= target else MixedForm(
@@ -102,12 +96,10 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
         solver = NewtonSolver(step_form, step_options)
         sol = solver.equilibrate()
         solver.release_linear_solver()
-        if first is None and solver.history:
-            first = solver.history[0][0]
+        if first is None and sol.newton_results:
+            first = sol.newton_results[0].residuals[0]
         records += sol.steps
-        linear += sol.linear_iterations
-        assembly += sol.assembly_time_s
-        solve_time += sol.solve_time_s
+        costs.add(sol)
         if len(path) > 1:
             log.info("  contrast %.3g of %.3g: %s in %d Newton iterations", kappa, target,
                      "converged" if sol.converged else "not converged",
@@ -117,19 +109,18 @@ def equilibrate_through_contrast(form: MixedForm, options: SolverOptions,
             break
         if step_form is form:
             break
-        previous, kappa = step_form, min(kappa * CONTRAST_STEP, target)
+        previous, kappa = step_form, min(kappa * options.contrast.factor, target)
     if sol.converged:  # one record at full load: the path's steps are not load steps
         sol.steps = [dataclasses.replace(
             sol.steps[-1], newton_iterations=sum(r.newton_iterations for r in records))]
-    sol.linear_iterations, sol.assembly_time_s, sol.solve_time_s = linear, assembly, solve_time
+    costs.into(sol)
     sol.wall_time_s = time.perf_counter() - t0
     return sol, first
 
 
 def _copy_state(source: MixedForm, target: MixedForm) -> None:
     """``target`` (same mesh and spaces) at ``source``'s state, load and contact pressures."""
-    target.gfu.vec.data = source.gfu.vec
-    target.restore_multipliers(source.multiplier_state())
+    State(target).restore(State(source).snapshot())
     target.set_load(float(source.load.Get()))
     x = target.gfu.vec.FV().NumPy()
     for pc in target.point_contacts:

@@ -24,6 +24,7 @@ from brainbulge.solver.linear import LinearSolver, make_linear_solver
 from brainbulge.solver.linear.sparse_reuse import PatternAdd, PatternGather, PatternProject
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import SolverOptions
+from brainbulge.solver.state import State
 
 log = logging.getLogger("brainbulge")
 
@@ -34,11 +35,11 @@ class MixedEquations:
     whether the closed-form MINI tangent is used where it applies)."""
 
     def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
-        self.opt = options = options or SolverOptions()
+        options = options or SolverOptions()
         self.form = form
-        krylov = ({} if options.krylov_max_iterations is None
-                  else {"maxiter": options.krylov_max_iterations})
-        self.linear: LinearSolver = make_linear_solver(options.linear_solver, form, **krylov)
+        self.state = State(form)  # x, lambda, t: what a solve changes
+        self.linear: LinearSolver = make_linear_solver(options.linear_solver, form,
+                                                       options.krylov)
         self.closed = None  # the closed-form residual and tangent, where they apply
         if form.element == "mini" and options.closed_form:
             # (Numba, ~0.5 s: imported only where it may apply)
@@ -66,12 +67,10 @@ class MixedEquations:
         self.res = form.gfu.vec.CreateVector()  # R at the last evaluated state
         self.t_assembly = 0.0
         self.t_solve = 0.0
-        self.with_curvature = True  # the contacts' curvature term in the next tangent
         self.contact = ActiveSet(form, self.free, fes.ndof)
-        # inexact Newton (Eisenstat-Walker): relative tolerance of an iterative linear solve
+        # inexact Newton (Eisenstat-Walker): an iterative linear solve to a relative tolerance
         self.inexact = options.linear_solver == "krylov"
-        self.eta = self.eta_cap = options.eta_max
-        self.last_linear_solution: np.ndarray | None = None
+        self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
         self._new_plans()
 
     def release_linear_solver(self) -> None:
@@ -80,7 +79,6 @@ class MixedEquations:
         its memory on top of the solver's (a later solve rebuilds them). The heap's free
         pages go back to the system too (:func:`brainbulge.heap.release_free_memory`)."""
         self.linear.release()
-        self.last_linear_solution = None
         self._new_plans()
         release_free_memory()
 
@@ -126,8 +124,9 @@ class MixedEquations:
         val = float(np.hypot(ru, rp))
         return val if np.isfinite(val) else np.inf
 
-    def tangent(self, x: ngs.BaseVector) -> sp.csr_matrix:
-        """``K = dR/dx`` (condensed) on the free DOFs, with the contacts' curvature terms."""
+    def tangent(self, x: ngs.BaseVector, curvature: bool = True) -> sp.csr_matrix:
+        """``K = dR/dx`` (condensed) on the free DOFs, with the contacts' curvature terms
+        (left out with ``curvature`` false: a modified Newton method)."""
         t0 = time.perf_counter()
         if self.closed is not None:
             K = self.closed.assemble(x.FV().NumPy())
@@ -140,22 +139,24 @@ class MixedEquations:
             K = sp.csr_matrix((np.asarray(data), indices, indptr),
                               shape=(mat.height, mat.width))
         K = self._free_part(K)
-        for C in self.contact.curvatures(x.FV().NumPy(), self.with_curvature):
+        for C in self.contact.curvatures(x.FV().NumPy(), curvature):
             K = self._add_curvature(K, self._restrict_free(C))
         self.t_assembly += time.perf_counter() - t0
         return K
 
     def newton_direction(
-        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None, guess: np.ndarray | None = None
-    ) -> tuple[ngs.BaseVector, list[np.ndarray]]:
-        """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``.
+        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None, guess: np.ndarray | None = None,
+        rtol: float | None = None,
+    ) -> tuple[ngs.BaseVector, list[np.ndarray], np.ndarray | None]:
+        """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``, and
+        the linear system's solution (None with a direct solver).
 
-        ``self.res`` must hold ``R(x)``, as in :meth:`newton`. Static condensation (MINI's
-        bubbles) extends the right-hand side before and the solution after the solve; the
-        contact rows come from :meth:`ActiveSet.linearize`. ``guess``: the linear system's
-        solution of a retry at the same state (another active set, or a tighter tolerance),
-        an initial guess for an iterative solver; the system's solution is kept in
-        ``self.last_linear_solution`` for that purpose.
+        ``self.res`` must hold ``R(x)``, as in :func:`~brainbulge.solver.newton.newton`.
+        Static condensation (MINI's bubbles) extends the right-hand side before and the
+        solution after the solve; the contact rows come from :meth:`ActiveSet.linearize`.
+        ``guess``: the linear system's solution of a retry at the same state (another active
+        set, or a tighter tolerance), an initial guess for an iterative solver solving to the
+        relative tolerance ``rtol``.
         """
         if K is None:  # a retry at the same state (new active set) reuses the tangent
             K = self.tangent(x)
@@ -171,9 +172,7 @@ class MixedEquations:
         K, b, guess = step.system(K, b, self.free, self.is_u_free, guess,
                                   self._project_elimination)
         t0 = time.perf_counter()
-        sol = self.linear.solve(K, b, rtol=self.eta if self.inexact else None, x0=guess)
-        if self.inexact:
-            self.last_linear_solution = sol
+        sol = self.linear.solve(K, b, rtol=rtol if self.inexact else None, x0=guess)
         self.t_solve += time.perf_counter() - t0
         dx_free, dlams = step.recover(sol, len(self.free))
         dx = x.CreateVector()
@@ -185,7 +184,30 @@ class MixedEquations:
         elif self.form.condense:
             dx.data += a.harmonic_extension * dx
             dx.data += a.inner_solve * rhs
-        return dx, dlams
+        return dx, dlams, (sol if self.inexact else None)
+
+    def residual_site(self, x: ngs.BaseVector) -> np.ndarray | None:
+        """Deformed position ``X + u`` [length] of the vertex whose free displacement DOFs
+        carry the largest force residual ``|R_v|`` at ``x`` (where a failed Newton solve left
+        its imbalance: the place to look at, or to refine); None if ``R`` is not finite."""
+        from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
+
+        R = self.residual(x)
+        if self._vertex_dofs is None:
+            form = self.form
+            dofs = vertex_dofs(form.fes.components[0], form.mesh)
+            dofs = np.where(dofs >= 0, dofs + form.fes.Range(0).start, -1)
+            self._vertex_dofs = (dofs, vertex_coordinates(form.mesh))
+        dofs, X = self._vertex_dofs
+        free = np.zeros(len(R), dtype=bool)
+        free[self.free] = True
+        on = (dofs >= 0) & free[np.maximum(dofs, 0)]
+        force = np.linalg.norm(np.where(on, R[np.maximum(dofs, 0)], 0.0), axis=1)
+        if not np.all(np.isfinite(force)) or not force.any():
+            return None
+        v = int(np.argmax(force))
+        u = np.where(dofs[v] >= 0, x.FV().NumPy()[np.maximum(dofs[v], 0)], 0.0)
+        return X[v] + u
 
     def max_penetration(self) -> float:
         """Largest penetration ``max(-g, 0)`` of the moving contact points [length]."""

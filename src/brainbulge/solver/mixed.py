@@ -166,14 +166,6 @@ class MixedForm:
     def Js_current(self) -> ngs.CoefficientFunction:
         return 1 + self.load * (self.Js - 1)
 
-    def multiplier_state(self) -> list[np.ndarray]:
-        """A copy of every contact multiplier ``lambda`` (to undo a failed step)."""
-        return [pc.lam.copy() for pc in self.point_contacts]
-
-    def restore_multipliers(self, state: list[np.ndarray]) -> None:
-        for pc, v in zip(self.point_contacts, state, strict=True):
-            pc.lam = v.copy()
-
     def contact_pressure(self) -> ngs.CoefficientFunction:
         """Current contact pressure ``lambda |grad g|`` [kPa] at the contact points, as a
         boundary field (zero off contact)."""

@@ -7,236 +7,288 @@ the contact forces. Newton's iteration is::
     K(x_k) dx = R(x_k),        x_{k+1} = x_k - s dx,        lambda_{k+1} = lambda_k - s dlam
 
 with the contact constraints of the active set (:mod:`brainbulge.solver.contact`), and ``s``
-halved from 1 until the scaled residual :meth:`Newton.scaled_norm` falls by the
-Armijo factor ``1 - 1e-4 s``. With the Krylov solver the linear solve is inexact, to the
-relative tolerance of :func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with
-its reason, after ``max_iterations``, at a non-finite residual, when the line search finds no
-step, after ``stagnation`` short steps in a row, or when it falls short of
+halved from 1 until the scaled residual :meth:`MixedEquations.scaled_norm
+<brainbulge.solver.equations.MixedEquations.scaled_norm>` falls by the Armijo factor
+``1 - 1e-4 s``. With the Krylov solver the linear solve is inexact, to the relative tolerance
+of :func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with its
+:class:`Reason`, after ``max_iterations``, at a non-finite residual, when the line search
+finds no step, after ``stagnation`` short steps in a row, or when it falls short of
 ``required_progress`` (:class:`SolverOptions`).
 
-This is one nonlinear solve at the form's current load; the load ramp that calls it
-(predictor, cut-back, restart) is :mod:`brainbulge.solver.ramp`.
+:func:`newton` is a function of the equations (:class:`MixedEquations`) and their state: it
+keeps nothing between solves and returns a :class:`NewtonResult`. What is shown of a solve
+(the log, the slow-solve watch) is an observer (:class:`NewtonObserver`). The load ramp that
+calls it (predictor, cut-back, restart) is :mod:`brainbulge.solver.ramp`.
 """
 
 from __future__ import annotations
 
+import enum
 import logging
 import time
+from collections.abc import Callable, Sequence
 from contextlib import nullcontext
+from dataclasses import dataclass, field
 
 import ngsolve as ngs
 import numpy as np
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.solver.equations import MixedEquations
-from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.inexact import ETA_MIN, forcing_term
-from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import SolverOptions
+from brainbulge.solver.state import Snapshot, State
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
 
+#: ``limit_step(x, dx) -> f``: a factor ``f`` in (0, 1] that scales the whole update
+#: ``(dx, dlam)`` before the line search (e.g. a cap on the displacement increment)
+StepLimit = Callable[[ngs.BaseVector, ngs.BaseVector], float]
 
-class Newton(MixedEquations):
-    """Newton's method at one load for a :class:`MixedForm`, controlled by ``options``
-    (:class:`SolverOptions`: tolerance, iterations, the linear solver and the accelerations).
 
-    Two accelerations apply where they can, each the plain path's result to round-off:
-    ``closed`` (the closed-form MINI tangent, :mod:`brainbulge.solver.fast.mini_tangent`;
-    option ``closed_form``) and ``relaxation`` (local solves at residual hotspots,
-    :mod:`brainbulge.solver.fast.hotspot`; option ``hotspot_relaxation``).
-    """
+class Reason(enum.Enum):
+    """Why a Newton solve ended."""
 
-    def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
-        super().__init__(form, options)
-        self.history: list[list[float]] = []  # scaled residual norms of each Newton solve
-        self.tightened_solves = 0  # directions solved again tighter after a failed line search
-        self.failure_site: np.ndarray | None = None  # of the last Newton solve that failed
-        self.failure_reason = ""  # why the last Newton solve failed ("": it converged)
-        self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
-        self.relaxation = (HotspotRelaxation(self) if self.opt.hotspot_relaxation
-                           and HotspotRelaxation.applies(form) else None)
+    CONVERGED = "converged"
+    NOT_FINITE = "not finite"
+    MAX_ITERATIONS = "max iterations"
+    TOO_SLOW = "too slow"
+    LINEAR_FAILED = "linear solve failed"
+    NO_STEP = "no step"
+    STAGNATED = "stagnated"
 
-    def newton(self, x: ngs.BaseVector, tolerance: float | None = None,
-               curvature_below: float = np.inf) -> tuple[bool, int, float]:
-        """Solve at the current load from the guess ``x`` (updated in place, with the
-        contact multipliers) to ``tolerance`` (default: the options' final one); returns
-        (converged, iterations, scaled residual). On failure ``self.failure_site`` is where
-        the force residual peaks and ``self.failure_reason`` says why it gave up.
 
-        ``curvature_below``: the contacts' curvature term enters the tangent only at
-        iterates whose scaled residual is at most this (a modified Newton method far from
-        the solution, option ``carried_curvature_tolerance``)."""
-        tol = self.opt.tolerance if tolerance is None else tolerance
-        # one OpenBLAS thread beside PARDISO (brainbulge.solver.threads); the Krylov path's
-        # long vectors keep theirs (111k-tet brain: 10 % slower on one)
-        try:
-            with nullcontext() if self.inexact else serial_openblas():
-                ok, its, norm, self.failure_reason = self._newton(x, tol, curvature_below)
-            if not ok:
-                self.failure_site = self.residual_site(x)
-            return ok, its, norm
-        finally:
-            self.with_curvature = True
+@dataclass(frozen=True)
+class NewtonResult:
+    """One Newton solve: whether it converged, its iterations, the scaled residual [-] of
+    each iterate (the first is the start's), the Krylov iterations (0 with a direct solver),
+    why it ended (``reason`` and ``detail``, one phrase for the user), the directions solved
+    again tighter after a failed line search, and, on failure, the deformed position
+    [length] of the vertex with the largest unbalanced force (None: not finite)."""
 
-    def residual_site(self, x: ngs.BaseVector) -> np.ndarray | None:
-        """Deformed position ``X + u`` [length] of the vertex whose free displacement DOFs carry
-        the largest force residual ``|R_v|`` at ``x`` (where a failed Newton solve left its
-        imbalance: the place to look at, or to refine); None if ``R`` is not finite."""
-        from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
+    converged: bool
+    iterations: int
+    residuals: tuple[float, ...]
+    linear_iterations: int
+    reason: Reason
+    detail: str = ""
+    tightened: int = 0
+    site: np.ndarray | None = None
 
-        R = self.residual(x)
-        if self._vertex_dofs is None:
-            form = self.form
-            dofs = vertex_dofs(form.fes.components[0], form.mesh)
-            dofs = np.where(dofs >= 0, dofs + form.fes.Range(0).start, -1)
-            self._vertex_dofs = (dofs, vertex_coordinates(form.mesh))
-        dofs, X = self._vertex_dofs
-        free = np.zeros(len(R), dtype=bool)
-        free[self.free] = True
-        on = (dofs >= 0) & free[np.maximum(dofs, 0)]
-        force = np.linalg.norm(np.where(on, R[np.maximum(dofs, 0)], 0.0), axis=1)
-        if not np.all(np.isfinite(force)) or not force.any():
-            return None
-        v = int(np.argmax(force))
-        u = np.where(dofs[v] >= 0, x.FV().NumPy()[np.maximum(dofs[v], 0)], 0.0)
-        return X[v] + u
+    @property
+    def norm(self) -> float:
+        """The last iterate's scaled residual [-]."""
+        return self.residuals[-1]
 
-    def _newton(self, x: ngs.BaseVector, tol: float, curvature_below: float
-                ) -> tuple[bool, int, float, str]:
-        """:meth:`newton`'s iteration: (converged, iterations, scaled residual, why it
-        gave up)."""
-        opt = self.opt
-        pcs = self.contact.contacts
-        self.contact.start_solve()
-        self.eta = self.eta_cap = opt.eta_max
-        self.linear.new_load_step()
-        norm = self.scaled_norm(self.residual(x))
-        self.history.append([])
-        short_steps, norm_before_short = 0, norm  # the run of short line-search steps
-        started = time.perf_counter()
-        for it in range(opt.max_iterations + 1):
-            self.history[-1].append(norm)
-            elapsed = time.perf_counter() - started
-            log.log(logging.INFO if elapsed > opt.slow_newton_s else logging.DEBUG,
-                    "    newton %d: |R| = %.3e (%.0f s)", it, norm, elapsed)
-            if norm <= tol:
-                return True, it, norm, ""
-            if not np.isfinite(norm):
-                return False, it, norm, "the residual is not finite"
-            if it == opt.max_iterations:
-                return False, it, norm, f"max_iterations = {it} reached"
-            progress = opt.required_progress
-            if (progress is not None and it == progress[0]
-                    and norm > progress[1] * self.history[-1][0]):
-                log.debug("    too slow: |R| %.3e after %d iterations from %.3e", norm, it,
-                          self.history[-1][0])
-                return False, it, norm, (f"too slow: |R| above {progress[1]:g} times its "
-                                         f"first ({self.history[-1][0]:.2e})")
-            K_x = None  # the tangent at x0, shared by the retries of this iteration
-            self.last_linear_solution = None  # and the last direction, their Krylov guess
-            x0 = x.CreateVector()
-            x0.data = x
-            lam0 = [pc.lam.copy() for pc in pcs]
-            tightened = False
-            for attempt in range(4):
-                try:
-                    if K_x is None:
-                        self.with_curvature = norm <= curvature_below
-                        K_x = self.tangent(x)
-                    dx, dlams = self.newton_direction(x, K_x, self.last_linear_solution)
-                except ConvergenceError as exc:
-                    if not self.inexact or self.eta <= ETA_MIN or not opt.retry_linear:
-                        return False, it, norm, f"the linear solve failed ({exc})"
-                    # a failed Krylov solve has asked for a fresh AMG: retry it, tighter
-                    log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
-                    self.eta = ETA_MIN
-                    try:
-                        dx, dlams = self.newton_direction(x, K_x)
-                    except ConvergenceError as exc:
-                        return False, it, norm, f"the linear solve failed ({exc})"
-                s, trial, tightened = self._line_search(x, x0, lam0, dx, dlams, norm, tol,
-                                                        retry=attempt < 3, tightened=tightened)
-                if s is None:
-                    return False, it, norm, "the line search found no step lowering |R|"
-                if s > 0:
-                    self._log_step(s)
-                    # (a full step that does not halve the residual is not the Krylov
-                    # tolerance's doing here: from one 1.54M-tet state, GMRES at 1e-7
-                    # instead of 1e-4 gave the same Newton residuals to four digits;
-                    # tightening after such steps only doubled the GMRES iterations)
-                    self.eta = min(self.eta_cap, forcing_term(self.eta, trial / norm, trial,
-                                                              tol, opt.eta_max))
-                    if s > 1 / 64:
-                        short_steps, norm_before_short = 0, trial
-                    else:
-                        short_steps += 1
-                    norm = trial
-                    if self.relaxation is not None and norm > tol:
-                        norm = self.relaxation.relax(x, norm)
-                    break
-                self._restore(x, x0, lam0)  # retry the direction at x0
-                self.residual(x)
-            self.contact.let_pulling_go()
-            if (0 < opt.stagnation <= short_steps and norm > tol
-                    and norm > 0.95 * norm_before_short):
-                log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
-                          norm_before_short)
-                return False, it + 1, norm, (f"stagnated: {short_steps} line-search steps "
-                                             "of at most 1/64 in a row")
-        its = opt.max_iterations  # (not reached: the loop returns at its last iteration)
-        return False, its, norm, f"max_iterations = {its} reached"
 
-    def _line_search(self, x: ngs.BaseVector, x0: ngs.BaseVector, lam0: list[np.ndarray],
-                     dx: ngs.BaseVector, dlams: list[np.ndarray], norm: float, tol: float,
-                     retry: bool, tightened: bool) -> tuple[float | None, float, bool]:
-        """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
-        ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
+class NewtonObserver:
+    """What is shown of a Newton solve; the base shows nothing."""
 
-        Returns ``(s, |R(trial)|, tightened)``: ``s > 0`` accepted (``x`` is the trial state);
-        ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
-        penetrating points were forced active, or a loose Krylov direction gave no step and
-        is solved 100x tighter (once per iteration: ``tightened``); ``s = None`` when no step
-        of at least 1/1024 lowers the residual (``x`` back at ``x0``).
-        """
-        pcs = self.contact.contacts
-        s = 1.0
-        while True:
-            x.data = x0 - s * dx
-            for pc, l0, dl in zip(pcs, lam0, dlams, strict=True):
-                pc.lam = l0 - s * dl
-            trial = self.scaled_norm(self.residual(x))
-            if trial < (1 - 1e-4 * s) * norm or trial <= tol:
-                return s, trial, tightened
-            if s == 1.0 and retry and self.contact.force_penetrating():
-                return 0.0, trial, tightened
-            s *= 0.5
-            if (s < 1 / 1024 and self.inexact and not tightened and self.eta > ETA_MIN
-                    and retry):
-                # no step at all from a loose Krylov direction: before giving up (and
-                # cutting the load step) solve the direction 100x tighter. (Retrying at
-                # every short step instead cost a 1.54M-tet run an 812 s solve for the same
-                # 1/16 step: there the nonlinearity, not the direction, made the step short.)
-                self.tightened_solves += 1
-                self.eta = self.eta_cap = max(ETA_MIN, 1e-2 * self.eta)
-                log.debug("    line search failed at Krylov rtol %.1e: retrying tighter",
-                          1e2 * self.eta)
-                return 0.0, trial, True
-            if s < 1 / 1024:
-                self._restore(x, x0, lam0)
-                return None, trial, tightened
+    def iteration(self, it: int, norm: float) -> None:
+        """Iterate ``it`` has scaled residual ``norm``."""
 
-    def _restore(self, x: ngs.BaseVector, x0: ngs.BaseVector, lam0: list[np.ndarray]) -> None:
-        x.data = x0
-        for pc, l0 in zip(self.contact.contacts, lam0, strict=True):
-            pc.lam = l0
+    def step(self, s: float, eq: MixedEquations, eta: float | None, curvature: bool) -> None:
+        """A line-search step ``s`` was accepted (``eta``: the Krylov tolerance, or None;
+        ``curvature``: the contacts' curvature term was in the tangent)."""
 
-    def _log_step(self, s: float) -> None:
-        pcs = self.contact.contacts
+
+class NewtonLog(NewtonObserver):
+    """The log of a solve: each iteration at DEBUG, at INFO once it has run longer than
+    ``slow_s`` [s] (a long fine-mesh solve shows its progress)."""
+
+    def __init__(self, slow_s: float) -> None:
+        self.slow_s = slow_s
+        self.started = time.perf_counter()
+
+    def iteration(self, it: int, norm: float) -> None:
+        elapsed = time.perf_counter() - self.started
+        log.log(logging.INFO if elapsed > self.slow_s else logging.DEBUG,
+                "    newton %d: |R| = %.3e (%.0f s)", it, norm, elapsed)
+
+    def step(self, s: float, eq: MixedEquations, eta: float | None, curvature: bool) -> None:
+        pcs = eq.contact.contacts
         log.debug("    step %.3g, %d active contact points (%d pulling)%s%s", s,
-                  sum(int(a.sum()) for a in self.contact.last_active),
+                  sum(int(a.sum()) for a in eq.contact.last_active),
                   sum(int((pc.lam < 0).sum()) for pc in pcs),
-                  "" if self.with_curvature or not pcs else ", no curvature",
-                  f", Krylov rtol {self.eta:.1e}" if self.inexact else "")
+                  "" if curvature or not pcs else ", no curvature",
+                  "" if eta is None else f", Krylov rtol {eta:.1e}")
 
+
+@dataclass
+class _Inexact:
+    """One solve's inexact-Newton controls: the Krylov tolerance ``eta``, its cap, the last
+    linear solution (the guess of a retry at the same state) and the tightened directions.
+    ``eta`` is None with a direct solver."""
+
+    eta: float | None
+    cap: float
+    guess: np.ndarray | None = None
+    tightened: int = 0
+    residuals: list[float] = field(default_factory=list)
+
+
+def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None = None,
+           curvature_below: float = np.inf, limit_step: StepLimit | None = None,
+           observers: Sequence[NewtonObserver] | None = None,
+           relax: Callable[[ngs.BaseVector, float], float] | None = None) -> NewtonResult:
+    """Solve ``R(x) = 0`` at the form's load from its current state (changed in place, with
+    the contact pressures) to ``tolerance`` (default: ``options.tolerance``).
+
+    ``curvature_below``: the contacts' curvature term enters the tangent only at iterates
+    whose scaled residual is at most this (a modified Newton method far from the solution).
+    ``limit_step``: a factor in (0, 1] applied to each Newton update before the line search.
+    ``observers``: default a :class:`NewtonLog`. ``relax(x, |R|) -> |R|``: a local solve
+    after each accepted step (:mod:`brainbulge.solver.fast.hotspot`)."""
+    tol = options.tolerance if tolerance is None else tolerance
+    watch = [NewtonLog(options.slow_newton_s)] if observers is None else observers
+    linear_before = sum(eq.linear.stats.iterations)
+    # one OpenBLAS thread beside PARDISO (brainbulge.solver.threads); the Krylov path's
+    # long vectors keep theirs (111k-tet brain: 10 % slower on one)
+    with nullcontext() if eq.inexact else serial_openblas():
+        run = _Inexact(options.eta_max if eq.inexact else None, options.eta_max)
+        ok, its, reason, detail = _iterate(eq, options, tol, curvature_below, limit_step,
+                                           watch, relax, run)
+    return NewtonResult(ok, its, tuple(run.residuals),
+                        int(sum(eq.linear.stats.iterations) - linear_before), reason, detail,
+                        run.tightened, None if ok else eq.residual_site(eq.state.x))
+
+
+def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below: float,
+             limit_step: StepLimit | None, watch: Sequence[NewtonObserver],
+             relax: Callable[[ngs.BaseVector, float], float] | None, run: _Inexact
+             ) -> tuple[bool, int, Reason, str]:
+    """:func:`newton`'s loop: (converged, iterations, reason, detail)."""
+    state = eq.state
+    eq.contact.start_solve()
+    eq.linear.new_load_step()
+    norm = eq.scaled_norm(eq.residual(state.x))
+    short_steps, norm_before_short = 0, norm  # the run of short line-search steps
+    for it in range(opt.max_iterations + 1):
+        run.residuals.append(norm)
+        for o in watch:
+            o.iteration(it, norm)
+        if norm <= tol:
+            return True, it, Reason.CONVERGED, ""
+        if not np.isfinite(norm):
+            return False, it, Reason.NOT_FINITE, "the residual is not finite"
+        if it == opt.max_iterations:
+            return False, it, Reason.MAX_ITERATIONS, f"max_iterations = {it} reached"
+        first, progress = run.residuals[0], opt.required_progress
+        if progress is not None and it == progress[0] and norm > progress[1] * first:
+            log.debug("    too slow: |R| %.3e after %d iterations from %.3e", norm, it, first)
+            return False, it, Reason.TOO_SLOW, (f"too slow: |R| above {progress[1]:g} times "
+                                                f"its first ({first:.2e})")
+        curvature = norm <= curvature_below
+        try:
+            s, trial = _step(eq, opt, state.snapshot(), norm, tol, curvature, limit_step, run)
+        except ConvergenceError as exc:
+            return False, it, Reason.LINEAR_FAILED, f"the linear solve failed ({exc})"
+        if s is None:
+            return False, it, Reason.NO_STEP, "the line search found no step lowering |R|"
+        for o in watch:
+            o.step(s, eq, run.eta, curvature)
+        # (a full step that does not halve the residual is not the Krylov tolerance's doing
+        # here: from one 1.54M-tet state, GMRES at 1e-7 instead of 1e-4 gave the same
+        # Newton residuals to four digits; tightening after such steps only doubled the
+        # GMRES iterations)
+        if run.eta is not None:
+            run.eta = min(run.cap, forcing_term(run.eta, trial / norm, trial, tol, opt.eta_max))
+        if s > 1 / 64:
+            short_steps, norm_before_short = 0, trial
+        else:
+            short_steps += 1
+        norm = trial
+        if relax is not None and norm > tol:
+            norm = relax(state.x, norm)
+        eq.contact.let_pulling_go()
+        if 0 < opt.stagnation <= short_steps and norm > tol and norm > 0.95 * norm_before_short:
+            log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
+                      norm_before_short)
+            return False, it + 1, Reason.STAGNATED, (f"stagnated: {short_steps} line-search "
+                                                     "steps of at most 1/64 in a row")
+    raise AssertionError("unreachable: the loop returns at its last iteration")
+
+
+def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol: float,
+          curvature: bool, limit_step: StepLimit | None, run: _Inexact
+          ) -> tuple[float | None, float]:
+    """One Newton iteration from ``x0`` (the state): the direction and its line search,
+    solved again (at most three times) when the line search asks for it. Returns ``(s,
+    |R(trial)|)`` of the accepted step (the state is the trial), ``s = None`` when none
+    lowers the residual (the state back at ``x0``). ``curvature``: the contacts' curvature
+    term in the tangent."""
+    state = eq.state
+    K = eq.tangent(state.x, curvature)  # shared by the retries of this iteration
+    run.guess = None  # the last linear solution, the guess of a retry
+    tightened = False
+    for attempt in range(4):
+        dx, dlams = _direction(eq, opt, K, run)
+        if limit_step is not None:
+            f = limit_step(state.x, dx)
+            if f < 1:
+                dx.data = f * dx
+                dlams = [f * d for d in dlams]
+        s, trial, tightened = _line_search(eq, state, x0, dx, dlams, norm, tol,
+                                           retry=attempt < 3, tightened=tightened, run=run)
+        if s is None or s > 0:
+            return s, trial
+        state.restore(x0)  # retry the direction at x0
+        eq.residual(state.x)
+    raise AssertionError("unreachable: the last attempt accepts a step or gives up")
+
+
+def _direction(eq: MixedEquations, opt: SolverOptions, K, run: _Inexact
+               ) -> tuple[ngs.BaseVector, list[np.ndarray]]:
+    """The Newton direction at the state; a Krylov solve that fails (it has asked for a
+    fresh AMG) is retried once at the tightest tolerance (unless ``retry_linear`` is off).
+    ConvergenceError when the linear solve fails."""
+    x = eq.state.x
+    try:
+        dx, dlams, run.guess = eq.newton_direction(x, K, run.guess, run.eta)
+    except ConvergenceError:
+        if run.eta is None or run.eta <= ETA_MIN or not opt.retry_linear:
+            raise
+        log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
+        run.eta = ETA_MIN
+        dx, dlams, run.guess = eq.newton_direction(x, K, None, run.eta)
+    return dx, dlams
+
+
+def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVector,
+                 dlams: list[np.ndarray], norm: float, tol: float, retry: bool,
+                 tightened: bool, run: _Inexact) -> tuple[float | None, float, bool]:
+    """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
+    ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
+
+    Returns ``(s, |R(trial)|, tightened)``: ``s > 0`` accepted (the state is the trial);
+    ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
+    penetrating points were forced active, or a loose Krylov direction gave no step and
+    is solved 100x tighter (once per iteration: ``tightened``); ``s = None`` when no step
+    of at least 1/1024 lowers the residual (the state back at ``x0``).
+    """
+    x = state.x
+    s = 1.0
+    while True:
+        x.data = x0.x - s * dx
+        state.set_multipliers([l0 - s * dl for l0, dl in zip(x0.lam, dlams, strict=True)])
+        trial = eq.scaled_norm(eq.residual(x))
+        if trial < (1 - 1e-4 * s) * norm or trial <= tol:
+            return s, trial, tightened
+        if s == 1.0 and retry and eq.contact.force_penetrating():
+            return 0.0, trial, tightened
+        s *= 0.5
+        if (s < 1 / 1024 and run.eta is not None and not tightened and run.eta > ETA_MIN
+                and retry):
+            # no step at all from a loose Krylov direction: before giving up (and
+            # cutting the load step) solve the direction 100x tighter. (Retrying at
+            # every short step instead cost a 1.54M-tet run an 812 s solve for the same
+            # 1/16 step: there the nonlinearity, not the direction, made the step short.)
+            run.tightened += 1
+            run.eta = run.cap = max(ETA_MIN, 1e-2 * run.eta)
+            log.debug("    line search failed at Krylov rtol %.1e: retrying tighter",
+                      1e2 * run.eta)
+            return 0.0, trial, True
+        if s < 1 / 1024:
+            state.restore(x0)
+            return None, trial, tightened

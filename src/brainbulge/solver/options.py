@@ -1,5 +1,12 @@
 """What a solve is asked to do (:class:`SolverOptions`) and what it returns (:class:`Solution`).
 
+The continuations', the Krylov solver's and the hotspot relaxation's tunables are frozen
+groups of :class:`SolverOptions` (``options.contrast``, ``options.sequencing``,
+``options.rezoning``, ``options.warm_start``, ``options.krylov``, ``options.hotspot``), each
+field declared
+once with :func:`~brainbulge.model.options.option`: default, unit, range and the reason for
+the default; a group checks its ranges when built.
+
 The load factor ``t`` in [0, 1] ramps the swelling, ``Js(t) = 1 + t (Js - 1)`` (docs/model.md
 section 1); a :class:`Solution` is the last converged state, the load it reached, and, when
 the ramp stopped short of ``t = 1``, a structured :class:`Failure`.
@@ -7,14 +14,16 @@ the ramp stopped short of ``t = 1``, a structured :class:`Failure`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from brainbulge.errors import ConvergenceError, InputError
+from brainbulge.model.options import check_ranges, option
 from brainbulge.solver.inexact import ETA_MIN
 
 if TYPE_CHECKING:
@@ -26,6 +35,131 @@ if TYPE_CHECKING:
 DIVERGENCE_ADVICE = "Try more --steps, a finer mesh, or check the boundary conditions"
 
 LINEAR_SOLVERS = ("pardiso", "krylov")
+
+#: the unit of a dimensionless field
+RATIO = " [-]"
+
+
+class OptionGroup:
+    """A frozen group of options, its fields declared with
+    :func:`~brainbulge.model.options.option`: built only with every value in its range."""
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
+class ContrastOptions(OptionGroup):
+    """The stiffness-contrast path of a fine stage (:mod:`brainbulge.solver.contrast`)."""
+
+    start: float = option(
+        2.0, "the contrast mu_max / mu_min the path starts from (at most the model's): white "
+        "over gray matter (666 / 333 kPa), the parenchyma's own, where the 100k-tet "
+        "template's fine stage converges from the 25k-tet state (4 Newton iterations with a "
+        "2 or 8 mm edge); the upper bound: the model's contrast alone, no path",
+        unit=RATIO, range=(1.0, 1e6))
+    factor: float = option(
+        math.sqrt(10.0), "growth of the contrast per step (2 -> 6.3 -> 20 for the brain's "
+        "CSF)", unit=RATIO, range=(1.01, 1e3))
+    progress_iterations: int = option(
+        3, "each step's Newton solve gives up when its scaled residual is not below "
+        "progress_factor times its first after this many iterations (the converged steps "
+        "logged on the 100k- and 1.40M-tet templates fell 40-18,000x in 3)",
+        unit=" iterations", range=(1, 100))
+    progress_factor: float = option(
+        0.1, "the fall of the scaled residual each step requires within progress_iterations "
+        "(the converged steps fell to 2e-3-3e-2 of their first)", unit=RATIO,
+        range=(0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class SequencingOptions(OptionGroup):
+    """Mesh sequencing, coarse mesh to fine (:mod:`brainbulge.solver.remesh.sequencing`)."""
+
+    coarse_tolerance: float = option(
+        1e-4, "the coarse stage's Newton tolerance on the scaled residual (never tighter "
+        "than the solve's): its state is only where the fine mesh starts, whose carried-over "
+        "residual is ~1e-2 (1.7e-2 at 1.40M from 111k tets, the same to four digits from a "
+        "coarse state at 1e-7); the 111k coarse ramp takes 6 Newton iterations instead of 9",
+        unit=RATIO, range=(1e-14, 1e-1))
+    fold_ratio: float = option(
+        0.2, "a contact point moved onto the obstacle goes back if an element of it is left "
+        "with less than this fraction of its reference measure (and less than before the "
+        "move): 18 folded tets at 1.40M under the skull's 2 mm rounded cut edge without it",
+        unit=RATIO, range=(0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class RezoningOptions(OptionGroup):
+    """2D rezoning during the load ramp (:mod:`brainbulge.solver.remesh.rezoning`)."""
+
+    q_min: float = option(
+        0.2, "rezone when the smallest deformed triangle quality 4 sqrt(3) A / sum l^2 falls "
+        "below this (above 1: after every accepted step)", unit=RATIO, range=(0.0, 2.0))
+    equilibration_iterations: int = option(
+        8, "Newton iterations allowed to equilibrate a carried-over state on the new mesh "
+        "before the rezoning counts as failed: in the sector study each rezoning that "
+        "succeeded converged in 4, each that failed stood at 3e-4-1e-2 after 14-20",
+        unit=" iterations", range=(1, 1000))
+    max_rezones: int = option(
+        50, "mesh exchanges in one solve before the ramp goes on without rezoning",
+        unit=" rezonings", range=(0, 10_000))
+
+
+@dataclass(frozen=True)
+class WarmStartOptions(OptionGroup):
+    """Newton from a given start state (another flap's solution) before the load is ramped
+    instead (:func:`brainbulge.studies.craniectomy.solve_brain`'s ``start``)."""
+
+    max_iterations: int = option(
+        8, "Newton iterations from the start state: about what a cold ramp of a large flap "
+        "takes (21k tets, 120 mm: 8, the same from the 100 mm flap's state, with the exact "
+        "tangent), so a start that does not help costs at most a ramp",
+        unit=" iterations", range=(1, 1000))
+    krylov_iterations: int = option(
+        200, "GMRES iterations of one linear solve from the start state: a larger flap's "
+        "start frees the tissue under the newly opened ring at full pressure; on the "
+        "111k-tet template (80 -> 100 mm) GMRES stood at 6e-3 after 1,000 iterations, twice, "
+        "150 s before the ramp; converging solves there take <= ~170",
+        unit=" iterations", range=(1, 100_000))
+
+
+@dataclass(frozen=True)
+class HotspotOptions(OptionGroup):
+    """The hotspot relaxation between Newton iterations
+    (:mod:`brainbulge.solver.fast.hotspot`; on or off: ``hotspot_relaxation``)."""
+
+    share: float = option(
+        0.5, "the hotspot: the fewest vertices holding this share of the scaled |R|^2 (at "
+        "1.40M tets 90-100 % sat at three CSF vertices of the flap rim)", unit=RATIO,
+        range=(0.01, 1.0))
+    max_vertices: int = option(
+        16, "a hotspot of more vertices is left to Newton (a residual spread over the body "
+        "is Newton's job); no other value measured", unit=" vertices", range=(1, 100_000))
+    rings: int = option(
+        2, "rings of neighbours solved with the hotspot (with them 4 fine iterations instead "
+        "of 7 at 1.40M tets; no other value measured)", unit=" rings", range=(0, 10))
+    max_iterations: int = option(
+        30, "Newton iterations of one local solve (a cap: the result is kept only when the "
+        "global residual falls); no other value measured", unit=" iterations",
+        range=(1, 1000))
+
+
+@dataclass(frozen=True)
+class KrylovOptions(OptionGroup):
+    """GMRES with AMG blocks (:class:`~brainbulge.solver.linear.krylov.BlockKrylovSolver`)."""
+
+    max_iterations: int = option(
+        1000, "GMRES iterations per linear solve, all restarts included (converging solves on "
+        "the 111k-tet template take <= ~170)", unit=" iterations", range=(1, 1_000_000))
+    restart: int = option(
+        200, "GMRES restart length (basis vectors kept: 1.7 GB at 1.08M unknowns); with 100 "
+        "the 1.40M-tet brain's fine-stage tangent stalled at 5.6e-2 after 200 iterations, it "
+        "converges in 157 without a restart", unit=" vectors", range=(1, 100_000))
+    refresh_factor: float = option(
+        1.5, "rebuild the AMG hierarchies when a solve takes more than this times the "
+        "iterations of the first solve after the last set-up; no other value measured",
+        unit=RATIO, range=(1.0, 1e3))
 
 
 @dataclass
@@ -87,10 +221,6 @@ class SolverOptions:
     #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
     #: after ``k`` iterations gives up (None: no such requirement)
     required_progress: tuple[int, float] | None = None
-    #: the ``required_progress`` of each step of the stiffness-contrast path
-    #: (:mod:`brainbulge.solver.contrast`; the converged steps logged on the 100k- and
-    #: 1.40M-tet templates fell 40-18,000x, from 2e-3 to 3e-2 after 3 iterations)
-    contrast_progress: tuple[int, float] = (3, 0.1)
     #: a Newton solve running longer than this [s] logs each iteration at INFO (else DEBUG),
     #: so that a long fine-mesh solve shows its progress in the log
     slow_newton_s: float = 30.0
@@ -111,9 +241,16 @@ class SolverOptions:
     #: a failed Krylov solve is retried once, tighter, with a fresh preconditioner (False:
     #: the Newton solve fails at once, e.g. from a start state that a ramp can replace)
     retry_linear: bool = True
-    #: GMRES iterations per Krylov solve (None: the Krylov solver's default,
-    #: :class:`~brainbulge.solver.linear.krylov.BlockKrylovSolver`)
-    krylov_max_iterations: int | None = None
+    #: the Krylov solver's budget, restart and AMG refresh (frozen group)
+    krylov: KrylovOptions = field(default_factory=KrylovOptions)
+    #: the hotspot relaxation's hotspot, patch and local Newton (frozen group)
+    hotspot: HotspotOptions = field(default_factory=HotspotOptions)
+
+    # --- the continuations (frozen groups: ``dataclasses.replace`` a group to change it) --
+    contrast: ContrastOptions = field(default_factory=ContrastOptions)
+    sequencing: SequencingOptions = field(default_factory=SequencingOptions)
+    rezoning: RezoningOptions = field(default_factory=RezoningOptions)
+    warm_start: WarmStartOptions = field(default_factory=WarmStartOptions)
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1:
@@ -182,6 +319,31 @@ class Failure:
 
 
 @dataclass
+class Costs:
+    """What solves cost, added up: assembly and linear-solve time [s] and Krylov iterations
+    (0 with a direct solver). The one place where the costs of several solves (the stages of
+    mesh sequencing, the steps of the contrast path, the meshes of rezoning) are summed."""
+
+    assembly_time_s: float = 0.0
+    solve_time_s: float = 0.0
+    linear_iterations: int = 0
+
+    def add(self, sol: Solution | Costs) -> Costs:
+        """``self`` plus the costs of ``sol``."""
+        self.assembly_time_s += sol.assembly_time_s
+        self.solve_time_s += sol.solve_time_s
+        self.linear_iterations += sol.linear_iterations
+        return self
+
+    def into(self, sol: Solution) -> Solution:
+        """``sol`` with these costs."""
+        sol.assembly_time_s = self.assembly_time_s
+        sol.solve_time_s = self.solve_time_s
+        sol.linear_iterations = self.linear_iterations
+        return sol
+
+
+@dataclass
 class Solution:
     """The last converged state, and how it was reached.
 
@@ -207,6 +369,8 @@ class Solution:
     failure: Failure | None = None  # set when Newton diverged at the smallest load step
     note: str = ""  # why the ramp stopped otherwise (stop hooks, an equilibration)
     context: str = ""  # appended in parentheses (e.g. a rezoning that failed)
+    #: every Newton solve of this solve, in order (:class:`~brainbulge.solver.newton.NewtonResult`)
+    newton_results: list[Any] = field(default_factory=list)
 
     @property
     def swelling_reached(self) -> float:

@@ -24,95 +24,99 @@ import time
 from pathlib import Path
 
 import ngsolve as ngs
+import numpy as np
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
 from brainbulge.model.problem import Problem
 from brainbulge.solver import restart
+from brainbulge.solver.equations import MixedEquations
+from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import Newton
-from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
+from brainbulge.solver.newton import NewtonResult, StepLimit, newton
+from brainbulge.solver.options import Costs, Failure, Solution, SolverOptions, StepRecord
+from brainbulge.solver.state import Snapshot
 
 log = logging.getLogger("brainbulge")
 
 FULL = 1 - 1e-12  # a load at least this is full load
 
+#: the predictor: the last accepted increment of ``x`` and its load step ``dt``
+Predictor = tuple[ngs.BaseVector, float]
 
-class NewtonSolver(Newton):
-    """Newton's method (:class:`~brainbulge.solver.newton.Newton`) inside a load ramp, for a
-    :class:`MixedForm` and the :class:`SolverOptions` it is built with: :meth:`solve` ramps
-    the load to 1, :meth:`equilibrate` solves at the form's current load."""
+
+class NewtonSolver:
+    """A :class:`MixedForm`'s equations (:class:`MixedEquations`), solved with the
+    :class:`SolverOptions` it is built with: :meth:`solve` ramps the load to 1,
+    :meth:`equilibrate` solves at the form's current load, :meth:`newton` is one Newton
+    solve (:func:`brainbulge.solver.newton.newton`)."""
+
+    def __init__(self, form: MixedForm, options: SolverOptions | None = None) -> None:
+        self.form = form
+        self.opt = options or SolverOptions()
+        self.equations = MixedEquations(form, self.opt)
+        self.state = self.equations.state
+        #: local solves at residual hotspots (MINI; option ``hotspot_relaxation``)
+        self.relaxation = (HotspotRelaxation(self.equations, self.opt.hotspot)
+                           if self.opt.hotspot_relaxation and HotspotRelaxation.applies(form)
+                           else None)
+
+    def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
+               limit_step: StepLimit | None = None) -> NewtonResult:
+        """One Newton solve at the form's load from its state (:func:`newton`)."""
+        relax = None if self.relaxation is None else self.relaxation.relax
+        return newton(self.equations, self.opt, tolerance, curvature_below, limit_step,
+                      relax=relax)
+
+    def release_linear_solver(self) -> None:
+        """Free the linear solver's work memory (:meth:`MixedEquations.release_linear_solver`)."""
+        self.equations.release_linear_solver()
 
     def solve(self) -> Solution:
         """Ramp the load from ``start_load`` (or a restart file's load) to 1; return the
         last converged state (the form holds it, at its load)."""
-        check_feasible(self)
-        form, opt = self.form, self.opt
+        check_feasible(self.equations)
+        form, opt, state = self.form, self.opt, self.state
         start = time.perf_counter()
-        x = form.gfu.vec
         sol = Solution(form=form, load=0.0, converged=False)
-        t, dt = opt.start_load, 1.0 / opt.steps
-        x_prev = x.CreateVector()
-        x_prev.data = x
-        last_increment: ngs.BaseVector | None = None
-        last_dt = 0.0
-        if opt.checkpoint is not None:
-            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, form, sol)
-            if resumed is not None:
-                t, dt, last_increment, last_dt = resumed
-                sol.resumed_from = t
-                x_prev.data = x
+        t, dt, predictor = self._start(sol)
+        last = state.snapshot()  # the last converged state
         bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
         bar.update(round(100 * t))
         try:
             while t < FULL:
                 dt = min(dt, 1 - t)
-                form.set_load(t + dt)
-                lam_saved = form.multiplier_state()
-                if last_increment is not None:  # predictor: extrapolate the last increment
-                    x.data = x_prev + (dt / last_dt) * last_increment
-                    form.set_load(t + dt)  # exact prescribed values over the predictor
-                final = t + dt >= FULL
-                tol = (opt.tolerance if final
-                       else max(opt.tolerance, opt.intermediate_tolerance))
-                ok, its, norm = self.newton(x, tol)
-                last_its = its  # of the last attempt
-                if not ok and last_increment is not None:  # retry without the predictor
-                    x.data = x_prev
-                    ok, last_its, norm = self.newton(x, tol)
-                    its += last_its
-                if not ok:
+                res, its = self._attempt(t + dt, dt, last, predictor, sol)
+                if not res.converged:
                     sol.rejected_steps += 1
-                    x.data = x_prev
-                    form.restore_multipliers(lam_saved)
+                    state.restore(last)
                     if opt.stop_on_failure is not None and opt.stop_on_failure(t):
                         sol.stopped_early = True
                         sol.note = f"stopped at load {t:.4f} (stop_on_failure)"
                         break
                     log.info("  load %.4f: not converged (|R| = %.2e, %s), cutting step",
-                             t + dt, norm, self.failure_reason)
+                             t + dt, res.norm, res.detail)
                     dt *= 0.5
                     if dt < opt.min_step:
                         sol.failure = Failure(load=t + 2 * dt, step=2 * dt, kept=t,
-                                              site=self.failure_site, residual=norm,
-                                              iterations=last_its,
-                                              reason=self.failure_reason)
+                                              site=res.site, residual=res.norm,
+                                              iterations=res.iterations, reason=res.detail)
                         break
                     continue
-                pen = self.max_penetration() if form.point_contacts else 0.0
-                increment = x.CreateVector()
-                increment.data = x - x_prev
-                last_increment, last_dt = increment, dt
-                x_prev.data = x
+                pen = self.equations.max_penetration() if form.point_contacts else 0.0
+                increment = state.x.CreateVector()
+                increment.data = state.x - last.x
+                predictor = (increment, dt)
                 t += dt
+                last = state.snapshot()
                 bar.update(round(100 * t) - bar.n)
-                sol.steps.append(StepRecord(t, its, 0, norm, pen))
-                log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, norm)
+                sol.steps.append(StepRecord(t, its, 0, res.norm, pen))
+                log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, res.norm)
                 if its <= 4:
                     dt *= 1.5
                 if opt.checkpoint is not None:
-                    restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, x, t, dt,
-                                  last_increment, last_dt, sol)
+                    restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, state.x, t,
+                                  dt, increment, predictor[1], sol)
                 if opt.stop_when is not None and t < FULL and opt.stop_when():
                     sol.stopped_early = True
                     sol.note = f"stopped at load {t:.4f} (stop_when)"
@@ -121,10 +125,47 @@ class NewtonSolver(Newton):
                 sol.converged = True
         finally:
             bar.close()
-            x.data = x_prev
+            state.restore(last)
             form.load.Set(t)
         sol.load = t
-        return finished(self, sol, start)
+        return finished(self.equations, sol, start)
+
+    def _start(self, sol: Solution) -> tuple[float, float, Predictor | None]:
+        """Where the ramp starts: ``(t, dt, predictor)`` from ``start_load`` and ``steps``,
+        or from the restart file (which also fills ``sol``'s steps)."""
+        opt = self.opt
+        if opt.checkpoint is not None:
+            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, self.form, sol)
+            if resumed is not None:
+                t, dt, increment, last_dt = resumed
+                sol.resumed_from = t
+                return t, dt, (increment, last_dt)
+        return opt.start_load, 1.0 / opt.steps, None
+
+    def _attempt(self, t: float, dt: float, last: Snapshot, predictor: Predictor | None,
+                 sol: Solution) -> tuple[NewtonResult, int]:
+        """Newton at load ``t`` (a step ``dt`` on) from the predicted state, extrapolating
+        the last increment, ``x_pred = x_last + (dt / dt_last) increment``, and, if that
+        fails, once more from the last converged state ``last`` (its ``x`` at the new load's
+        prescribed values, with the failed attempt's contact pressures). Returns the last
+        Newton result and the iterations of both."""
+        form, opt, state = self.form, self.opt, self.state
+        form.set_load(t)
+        if predictor is not None:
+            increment, last_dt = predictor
+            state.x.data = last.x + (dt / last_dt) * increment
+            form.set_load(t)  # exact prescribed values over the predictor
+        tol = opt.tolerance if t >= FULL else max(opt.tolerance, opt.intermediate_tolerance)
+        res = self.newton(tol)
+        sol.newton_results.append(res)
+        its = res.iterations
+        if not res.converged and predictor is not None:
+            state.restore(last, multipliers=False)
+            form.set_load(t)
+            res = self.newton(tol)
+            sol.newton_results.append(res)
+            its += res.iterations
+        return res, its
 
     def equilibrate(self) -> Solution:
         """Newton at the form's current load from its current state (one carried over
@@ -132,26 +173,24 @@ class NewtonSolver(Newton):
         solution), to the final tolerance, without load steps, the curvature term of the
         contacts entering the tangent only below ``carried_curvature_tolerance``. On
         failure the state is restored and ``converged`` is false."""
-        form = self.form
+        form, state = self.form, self.state
         start = time.perf_counter()
-        t = float(form.load.Get())
+        t = state.load
         sol = Solution(form=form, load=t, converged=False)
-        x = form.gfu.vec
-        x0 = x.CreateVector()
-        x0.data = x
-        lam0 = form.multiplier_state()
-        ok, its, norm = self.newton(x, curvature_below=self.opt.carried_curvature_tolerance)
-        if ok:
-            pen = self.max_penetration() if form.point_contacts else 0.0
-            sol.steps.append(StepRecord(t, its, 0, norm, pen))
+        before = state.snapshot()
+        res = self.newton(curvature_below=self.opt.carried_curvature_tolerance)
+        sol.newton_results.append(res)
+        if res.converged:
+            pen = self.equations.max_penetration() if form.point_contacts else 0.0
+            sol.steps.append(StepRecord(t, res.iterations, 0, res.norm, pen))
             sol.converged = True
         else:
-            x.data = x0
-            form.restore_multipliers(lam0)
+            state.restore(before)
             sol.rejected_steps = 1
             sol.note = (f"Newton did not converge at load {t:.4f} from the given state "
-                        f"(|R| = {norm:.2e} after {its} iterations: {self.failure_reason})")
-        return finished(self, sol, start)
+                        f"(|R| = {res.norm:.2e} after {res.iterations} iterations: "
+                        f"{res.detail})")
+        return finished(self.equations, sol, start)
 
 
 def solve(
@@ -165,10 +204,11 @@ def solve(
     return NewtonSolver(form, options).solve()
 
 
-def check_feasible(solver: NewtonSolver) -> None:
+def check_feasible(eq: MixedEquations) -> None:
     """A body with no traction-free boundary cannot swell (the skull is rigid): contact
     boundaries count as free where they are off the skull at rest (an opening)."""
-    form = solver.form
+    form = eq.form
+    solver = eq
     problem = form.problem
     if problem.traction_free_boundaries():
         return
@@ -184,7 +224,7 @@ def check_feasible(solver: NewtonSolver) -> None:
         )
 
 
-def finished(solver: NewtonSolver, sol: Solution, start: float) -> Solution:
+def finished(solver: MixedEquations, sol: Solution, start: float) -> Solution:
     """``sol`` with the penetration and swelling reached, the wall, assembly and
     linear-solve times and the Krylov iterations."""
     form = solver.form
@@ -192,7 +232,5 @@ def finished(solver: NewtonSolver, sol: Solution, start: float) -> Solution:
     swelling = [float(v) for v in form.problem.swelling.values()]
     sol.target_swelling = max(swelling, key=lambda js: abs(js - 1), default=1.0)
     sol.wall_time_s = time.perf_counter() - start
-    sol.assembly_time_s = solver.t_assembly
-    sol.solve_time_s = solver.t_solve
-    sol.linear_iterations = int(sum(solver.linear.stats.iterations))
-    return sol
+    return Costs(solver.t_assembly, solver.t_solve,
+                 int(sum(solver.linear.stats.iterations))).into(sol)

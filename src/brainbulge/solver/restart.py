@@ -19,6 +19,7 @@ import numpy as np
 
 from brainbulge.atomic import note_written
 from brainbulge.solver.options import Solution, StepRecord
+from brainbulge.solver.state import State
 
 if TYPE_CHECKING:
     from brainbulge.solver.mixed import MixedForm
@@ -38,7 +39,7 @@ def write(path: Path, key: str, form: MixedForm, x: ngs.BaseVector, t: float, dt
     np.savez(tmp, key=key, ndof=len(x), t=t, dt=dt, last_dt=last_dt,
              x=x.FV().NumPy(), increment=increment.FV().NumPy(),
              steps=steps, rejected=sol.rejected_steps,
-             **{f"lam{i}": v for i, v in enumerate(form.multiplier_state())})
+             **{f"lam{i}": v for i, v in enumerate(State(form).multipliers)})
     os.replace(tmp, path)
     note_written(path)  # in the output folder's manifest
 
@@ -50,7 +51,7 @@ def read(path: Path, key: str, form: MixedForm, sol: Solution
     if not path.is_file():
         return None
     x = form.gfu.vec
-    n_lam = len(form.multiplier_state())
+    n_lam = len(form.point_contacts)
     try:  # a truncated or foreign file (BadZipFile, EOFError, zlib.error, ...) is skipped
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in f.files}
@@ -68,7 +69,7 @@ def read(path: Path, key: str, form: MixedForm, sol: Solution
     x.FV().NumPy()[:] = data["x"]
     increment = x.CreateVector()
     increment.FV().NumPy()[:] = data["increment"]
-    form.restore_multipliers([data[f"lam{i}"] for i in range(n_lam)])
+    State(form).set_multipliers([data[f"lam{i}"] for i in range(n_lam)])
     form.set_load(t)
     sol.steps = [StepRecord(float(a), int(b), int(c), float(d), float(e))
                  for a, b, c, d, e in data["steps"].reshape(-1, 5)]

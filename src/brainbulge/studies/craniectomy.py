@@ -181,17 +181,17 @@ def solve_brain(
         if start is not None and not restart.is_file() and start(form):
             # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
             solver = NewtonSolver(form, dataclasses.replace(
-                options, max_iterations=START_MAX_ITERATIONS, carried_curvature_tolerance=np.inf,
-                retry_linear=False, krylov_max_iterations=START_KRYLOV_ITERATIONS))
+                options, max_iterations=options.warm_start.max_iterations,
+                carried_curvature_tolerance=np.inf, retry_linear=False,
+                krylov=dataclasses.replace(options.krylov,
+                                           max_iterations=options.warm_start.krylov_iterations)))
             sol = solver.equilibrate()
             started = sol.converged
             if not sol.converged:
                 log.info("  no convergence from the start state (%s): ramping the load",
                          sol.message)
                 solver.release_linear_solver()
-                form.gfu.vec[:] = 0.0
-                form.restore_multipliers([np.zeros_like(v) for v in form.multiplier_state()])
-                form.set_load(0.0)
+                solver.state.reset()
         if started is not True:
             solver = NewtonSolver(form, options)
             sol = solver.solve()
@@ -243,20 +243,6 @@ def write_brain_outputs(
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
     return summary
-
-
-#: Newton iterations from a start state (``solve_brain(start=...)``) before the load is
-#: ramped instead: about what a cold ramp of a large flap takes (21k tets, 120 mm: 8, the
-#: same from the 100 mm flap's state, with the exact tangent; the modified tangent of mesh
-#: sequencing stalled there), so a start that does not help costs at most a ramp
-START_MAX_ITERATIONS = 8
-
-#: GMRES iterations of one linear solve from a start state before the load is ramped instead.
-#: A larger flap's start from the smaller one's state frees the tissue under the newly opened
-#: ring at full pressure: on the 111k-tet template (80 -> 100 mm) GMRES stood at a relative
-#: residual of 6e-3 after 1,000 iterations, twice (with a fresh preconditioner), 150 s
-#: before the ramp; converging solves there take <= ~170 iterations
-START_KRYLOV_ITERATIONS = 200
 
 
 #: mesh sequencing: largest relative volume difference between the coarse and the fine mesh

@@ -22,7 +22,7 @@ inside the bone) and only the newly opened skull lets go. Where that state is mi
 smallest diameter, or still running on another worker) or Newton does not converge from it,
 the load is ramped from ``Js = 1`` as for any scenario (or mesh sequencing, with
 ``coarse_tets``/``coarse_mesh``); with GMRES a first linear solve that fails gives the start
-up at once (:data:`~brainbulge.studies.craniectomy.START_KRYLOV_ITERATIONS`). The state
+up at once (``SolverOptions.warm_start``). The state
 reached is the same equilibrium to within the solver's tolerance (tests/test_plan.py).
 
 **Damage measures** come from the fields the summary samples at its integration points

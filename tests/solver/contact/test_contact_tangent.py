@@ -22,9 +22,9 @@ def test_tangent_with_contact_curvature_matches_the_plain_scipy_construction() -
     pc = coarse.point_contacts[0]
     assert (pc.lam > 0).sum() > 10
     for _ in range(2):
-        K = solver.tangent(x)
+        K = solver.equations.tangent(x)
         mat = coarse.a.mat
         ref = sp.csr_matrix(mat.CSR(), shape=(mat.height, mat.width)) - pc.curvature()
-        ref = ref[solver.free][:, solver.free]
+        ref = ref[solver.equations.free][:, solver.equations.free]
         assert pc.curvature().nnz > 0
         assert abs(K - ref).max() <= 1e-12 * abs(ref).max()

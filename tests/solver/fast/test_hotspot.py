@@ -17,6 +17,7 @@ from brainbulge.geometry.ngsolve_arrays import vertex_coordinates, vertex_dofs
 from brainbulge.solver import NewtonSolver, SolverOptions, mixed
 from brainbulge.solver.fast.hotspot import HotspotRelaxation, LocalProblem
 from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.options import HotspotOptions
 from contact_cases import A, _capped_ball
 
 
@@ -43,7 +44,7 @@ def state(converged):
     form.gfu.vec.FV().NumPy()[:] = x_conv
     for pc, lam in zip(form.point_contacts, lam_conv, strict=True):
         pc.lam = lam.copy()
-    solver.residual(form.gfu.vec)
+    solver.equations.residual(form.gfu.vec)
     return form, solver, x_conv
 
 
@@ -59,9 +60,9 @@ def test_relax_returns_a_displaced_vertex_to_equilibrium(state) -> None:
     form, solver, x_conv = state
     x = form.gfu.vec
     v = _displace(form, [0.3, 0.3, 0.3], [0.02, -0.01, 0.015])
-    norm = solver.scaled_norm(solver.residual(x))
-    relaxation = HotspotRelaxation(solver, rings=1)
-    assert list(relaxation.hotspot(solver.res.FV().NumPy())) == [v]
+    norm = solver.equations.scaled_norm(solver.equations.residual(x))
+    relaxation = HotspotRelaxation(solver.equations, HotspotOptions(rings=1))
+    assert list(relaxation.hotspot(solver.equations.res.FV().NumPy())) == [v]
     new = relaxation.relax(x, norm)
     assert norm > 1e-2 and new < 1e-3 * norm
     rec = relaxation.records[-1]
@@ -75,12 +76,12 @@ def test_relax_returns_a_displaced_vertex_to_equilibrium(state) -> None:
     dofs = vertex_dofs(form.fes.components[0], form.mesh)[v]
     assert np.abs(d[dofs]).max() < 0.02 * 0.02
     assert np.abs(d[u.start : u.stop]).max() < 0.1 * 0.02
-    assert new == pytest.approx(solver.scaled_norm(solver.res.FV().NumPy()))
+    assert new == pytest.approx(solver.equations.scaled_norm(solver.equations.res.FV().NumPy()))
 
 
 def _local_problem(form, solver, v: int) -> LocalProblem:
     """The local problem of the patch ``v`` + one ring, its active contact points included."""
-    return HotspotRelaxation(solver, rings=1).local_problem(np.array([v]))
+    return HotspotRelaxation(solver.equations, HotspotOptions(rings=1)).local_problem(np.array([v]))
 
 
 @pytest.mark.parametrize("where", ["interior", "on the skull"])
@@ -109,20 +110,21 @@ def test_local_tangent_is_the_derivative_of_the_local_residual(state, where) -> 
           - local.assemble(Xm, lam - dy[n:], tangent=False)[0]) / 2
     assert np.linalg.norm(fd - K @ dy) < 1e-6 * np.linalg.norm(K @ dy)
     # the local residual is the global one at the local DOFs (contact forces included)
-    solver.residual(x)
-    assert np.allclose(R[:n], solver.res.FV().NumPy()[local.dofs], rtol=0,
+    solver.equations.residual(x)
+    assert np.allclose(R[:n], solver.equations.res.FV().NumPy()[local.dofs], rtol=0,
                        atol=1e-10 * abs(R[:n]).max())
 
 
 def test_a_spread_residual_has_no_hotspot(state) -> None:
     form, solver, _ = state
     x = form.gfu.vec
-    free = solver.free[solver.is_u_free]  # (bubbles are not free DOFs of the condensed form)
+    eq = solver.equations
+    free = eq.free[eq.is_u_free]  # (bubbles are not free DOFs of the condensed form)
     noise = np.random.default_rng(2).standard_normal(len(free))
     x.FV().NumPy()[free] += 1e-4 * noise
-    norm = solver.scaled_norm(solver.residual(x))
-    relaxation = HotspotRelaxation(solver)
-    assert relaxation.hotspot(solver.res.FV().NumPy()) is None
+    norm = solver.equations.scaled_norm(solver.equations.residual(x))
+    relaxation = HotspotRelaxation(solver.equations)
+    assert relaxation.hotspot(solver.equations.res.FV().NumPy()) is None
     before = x.FV().NumPy().copy()
     assert relaxation.relax(x, norm) == norm
     assert np.array_equal(x.FV().NumPy(), before) and not relaxation.records
@@ -136,10 +138,10 @@ def test_a_vertex_pressed_on_the_skull_is_relaxed_back_onto_it(state) -> None:
     X = pc.X[i]
     v = _displace(form, X, -0.01 * X / np.linalg.norm(X))  # off the skull, inwards
     x = form.gfu.vec
-    norm = solver.scaled_norm(solver.residual(x))
+    norm = solver.equations.scaled_norm(solver.equations.residual(x))
     assert pc.g[i] > 5e-3
-    relaxation = HotspotRelaxation(solver)
-    assert v in relaxation.hotspot(solver.res.FV().NumPy())
+    relaxation = HotspotRelaxation(solver.equations)
+    assert v in relaxation.hotspot(solver.equations.res.FV().NumPy())
     new = relaxation.relax(x, norm)
     assert relaxation.records[-1].kept and relaxation.last_patch[v]
     assert new < 1e-2 * norm
@@ -153,7 +155,7 @@ def test_a_local_result_that_raises_the_residual_is_not_kept(state, monkeypatch)
     form, solver, _ = state
     x = form.gfu.vec
     _displace(form, [0.3, 0.3, 0.3], [0.02, -0.01, 0.015])
-    norm = solver.scaled_norm(solver.residual(x))
+    norm = solver.equations.scaled_norm(solver.equations.residual(x))
     before = x.FV().NumPy().copy()
 
     def overshoot(self, X, target, max_iterations):  # a "solution" far off
@@ -161,12 +163,12 @@ def test_a_local_result_that_raises_the_residual_is_not_kept(state, monkeypatch)
         return 1
 
     monkeypatch.setattr(LocalProblem, "solve", overshoot)
-    relaxation = HotspotRelaxation(solver)
+    relaxation = HotspotRelaxation(solver.equations)
     assert relaxation.relax(x, norm) == pytest.approx(norm, rel=1e-12)
     assert not relaxation.records[-1].kept
     assert np.array_equal(x.FV().NumPy(), before)
-    kept_residual = solver.res.FV().NumPy().copy()  # restored, not evaluated again
-    assert np.allclose(kept_residual, solver.residual(x), rtol=0,
+    kept_residual = solver.equations.res.FV().NumPy().copy()  # restored, not evaluated again
+    assert np.allclose(kept_residual, solver.equations.residual(x), rtol=0,
                        atol=1e-12 * np.abs(kept_residual).max())
 
 

@@ -103,9 +103,9 @@ def test_hotspot_local_problems_take_the_same_element_systems_as_ngsolves() -> N
     assert solver.solve().converged
     X = form.gfu.vec.FV().NumPy()
     v = int(np.argmin(np.linalg.norm(vertex_coordinates(form.mesh) - [0.2, 0.5], axis=1)))
-    X[[v, v + solver.closed.nH1]] += [0.01, -0.005]  # one vertex displaced
-    solver.residual(form.gfu.vec)
-    relaxation = HotspotRelaxation(solver)
-    local = relaxation.local_problem(relaxation.hotspot(solver.res.FV().NumPy()))
-    assert local.closed is solver.closed
+    X[[v, v + solver.equations.closed.nH1]] += [0.01, -0.005]  # one vertex displaced
+    solver.equations.residual(form.gfu.vec)
+    relaxation = HotspotRelaxation(solver.equations)
+    local = relaxation.local_problem(relaxation.hotspot(solver.equations.res.FV().NumPy()))
+    assert local.closed is solver.equations.closed
     assert_local_systems_agree(local, X)

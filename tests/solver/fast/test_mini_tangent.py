@@ -121,7 +121,7 @@ def test_newton_takes_the_same_path_with_either_tangent() -> None:
 def test_other_forms_keep_ngsolves_tangent() -> None:
     assert not applies(MixedForm(_problem(curved=True), element="mini"))
     assert not applies(MixedForm(_problem(), element="taylor-hood"))
-    assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).closed is None
+    assert NewtonSolver(MixedForm(_problem(curved=True), element="mini")).equations.closed is None
 
 
 
@@ -178,7 +178,7 @@ def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(caplog) -> None:
         with caplog.at_level(logging.WARNING, logger="brainbulge"):
             ns = NewtonSolver(MixedForm(problem, element="mini"))
             sol = ns.solve()
-        assert (ns.closed is not None) == closed
+        assert (ns.equations.closed is not None) == closed
         warned = "closed-form tangent not used (more than 128 colours" in caplog.text
         assert warned != closed, caplog.text
         assert sol.converged
@@ -189,8 +189,8 @@ def test_a_set_up_it_cannot_do_falls_back_to_ngsolves_tangent(caplog) -> None:
 def test_hotspot_local_problems_take_the_same_element_systems_as_ngsolves(form_and_state) -> None:
     form, mt = form_and_state
     solver = NewtonSolver(form)
-    assert solver.closed is not None
-    relaxation = HotspotRelaxation(solver)
+    assert solver.equations.closed is not None
+    relaxation = HotspotRelaxation(solver.equations)
     local = relaxation.local_problem(np.array([int(mt.verts[0, 0])]))
-    assert local.closed is solver.closed
+    assert local.closed is solver.equations.closed
     assert_local_systems_agree(local, form.gfu.vec.FV().NumPy())

@@ -137,7 +137,7 @@ def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None
     solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
     sol = solver.solve()
     assert sol.converged
-    assert solver.linear.lu_solves == 0
+    assert solver.equations.linear.lu_solves == 0
 
 
 

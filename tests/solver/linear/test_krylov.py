@@ -18,6 +18,7 @@ from brainbulge.solver.linear.direct import PardisoSolver
 from brainbulge.solver.linear.krylov import BlockKrylovSolver
 from brainbulge.solver.linear.layout import displacement_layout, free_dofs
 from brainbulge.solver.linear.sparse_reuse import PatternProject
+from brainbulge.solver.options import KrylovOptions
 from inclusion_cases import STIFF, _inclusion_problem
 
 # several AMG levels even on this small mesh
@@ -34,7 +35,7 @@ def test_layout_matches_ngsolve_ordering(swollen) -> None:
     lay = displacement_layout(form)
     V = form.fes.components[0]
     per_comp = V.ndof // 3
-    free_u = ns.free[ns.is_u_free]
+    free_u = ns.equations.free[ns.equations.is_u_free]
     np.testing.assert_array_equal(lay.component, free_u // per_comp)
     np.testing.assert_array_equal(lay.vertex, free_u % per_comp)
     assert per_comp == form.mesh.nv + form.mesh.ne  # one bubble per tet and component
@@ -45,8 +46,8 @@ def _rest_stiffness(form):
     the linearised isochoric stiffness, whose kernel holds the rigid motions."""
     ns = NewtonSolver(form, SolverOptions())
     form.set_load(0.0)
-    K = ns.tangent(form.gfu.vec)
-    return K[ns.is_u_free][:, ns.is_u_free]
+    K = ns.equations.tangent(form.gfu.vec)
+    return K[ns.equations.is_u_free][:, ns.equations.is_u_free]
 
 
 def test_rigid_modes_in_the_kernel_of_the_rest_stiffness(box3d) -> None:
@@ -68,10 +69,10 @@ def swollen_taylor_hood():
     ns = NewtonSolver(form, SolverOptions(tolerance=1e-10))
     for load in (0.4, 0.7):
         form.set_load(load)
-        assert ns.newton(form.gfu.vec)[0]
-    K = ns.tangent(form.gfu.vec)
+        assert ns.newton().converged
+    K = ns.equations.tangent(form.gfu.vec)
     form.set_load(1.0)
-    return form, ns, K, ns.residual(form.gfu.vec)[ns.free].copy()
+    return form, ns, K, ns.equations.residual(form.gfu.vec)[ns.equations.free].copy()
 
 
 def test_taylor_hood_layout_and_rigid_modes(box3d) -> None:
@@ -159,7 +160,8 @@ def test_matches_direct_solve(swollen) -> None:
 
 def test_true_residual_check_raises_when_the_budget_is_too_small(swollen) -> None:
     form, _, K, r = swollen
-    solver = BlockKrylovSolver.from_form(form, rtol=1e-10, maxiter=3, amg=AMG)
+    solver = BlockKrylovSolver.from_form(form, KrylovOptions(max_iterations=3), rtol=1e-10,
+                                         amg=AMG)
     with pytest.raises(ConvergenceError, match="relative residual"):
         solver.solve(K, r)
     # a failed solve rebuilds the hierarchy next time; a looser tolerance is met
@@ -180,10 +182,10 @@ def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
     saved = x.FV().NumPy().copy()
     dx = x.CreateVector()
     dx.FV().NumPy()[:] = 0
-    dx.FV().NumPy()[ns.free] = x1
+    dx.FV().NumPy()[ns.equations.free] = x1
     dx.data += form.a.harmonic_extension * dx
     x.data -= dx
-    K2 = ns.tangent(x)
+    K2 = ns.equations.tangent(x)
     x.FV().NumPy()[:] = saved
     assert abs(K2 - K1).max() > 1e-3 * abs(K1).max()
     x3 = solver.solve(K2, r1)
@@ -192,7 +194,7 @@ def test_setup_is_reused_across_right_hand_sides_and_matrices(swollen) -> None:
         ref = _direct(K, r)
         assert np.linalg.norm(sol - ref) <= 1e-6 * np.linalg.norm(ref)
     # iterations far above those right after the set-up trigger a rebuild, as does refresh()
-    solver.refresh_factor = 0.1
+    solver.refresh_factor = 0.1  # (below the option's range: a rebuild at every solve)
     solver.solve(K2, r1)
     solver.solve(K2, r1)
     assert solver.stats.setups == 2
@@ -206,7 +208,7 @@ def test_schur_matrix_is_kept_until_the_next_load_step(swollen) -> None:
     displacement block within a load step keeps them, and the solves stay exact to the
     tolerance."""
     form, ns, K1, r1 = swollen
-    K2 = K1 + sp.diags(np.where(ns.is_u_free, 0.3 * np.abs(K1.diagonal()), 0.0))
+    K2 = K1 + sp.diags(np.where(ns.equations.is_u_free, 0.3 * np.abs(K1.diagonal()), 0.0))
     solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
     solver.solve(K1, r1)
     x2 = solver.solve(K2, r1)
@@ -254,7 +256,7 @@ def test_extra_constraint_rows_of_an_active_set(swollen) -> None:
 
     form, ns, K, r = swollen
     solver = BlockKrylovSolver.from_form(form, rtol=1e-10, amg=AMG)
-    iu = np.flatnonzero(ns.is_u_free)
+    iu = np.flatnonzero(ns.equations.is_u_free)
     rng = np.random.default_rng(1)
     for n_c in (5, 12):
         cols = rng.choice(iu, n_c, replace=False)
@@ -275,13 +277,13 @@ def test_augmented_active_set_system_has_the_same_solution(swollen) -> None:
 
     form, ns, K, r = swollen
     rng = np.random.default_rng(3)
-    iu = np.flatnonzero(ns.is_u_free)
+    iu = np.flatnonzero(ns.equations.is_u_free)
     rows = rng.choice(iu, size=12, replace=False)
     B = sp.csr_matrix((rng.uniform(0.5, 2.0, 12), (np.arange(12), rows)), shape=(12, K.shape[0]))
     c = rng.normal(size=12)
     plain = sp.bmat([[K, -B.T], [-B, None]], format="csr")
     ref = sp.linalg.spsolve(plain.tocsc(), np.concatenate([r, c]))
-    Ka, ba = augmented(K, r, B, c, ns.is_u_free)
+    Ka, ba = augmented(K, r, B, c, ns.equations.is_u_free)
     aug = sp.bmat([[Ka, -B.T], [-B, None]], format="csr")
     x = sp.linalg.spsolve(aug.tocsc(), np.concatenate([ba, c]))
     np.testing.assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
@@ -292,8 +294,8 @@ def _nodal_constraints(form, ns, K, m: int, seed: int = 5):
     """``m`` constraint rows ``B_i = A_i n_i^T`` on distinct vertices (unit normals ``n_i``),
     as the P1 contact points give them, and a right-hand side ``c``."""
     rng = np.random.default_rng(seed)
-    layout = displacement_layout(form, ns.free)
-    iu = np.flatnonzero(ns.is_u_free)
+    layout = displacement_layout(form, ns.equations.free)
+    iu = np.flatnonzero(ns.equations.is_u_free)
     v_all, count = np.unique(layout.vertex, return_counts=True)
     verts = rng.choice(v_all[count == layout.dim], size=m, replace=False)  # wholly free
     rows, cols, vals = [], [], []
@@ -321,7 +323,7 @@ def test_nodal_elimination_solves_the_active_set_saddle_point(swollen) -> None:
     plain = sp.bmat([[K, -B.T], [-B, None]], format="csr")
     ref = sp.linalg.spsolve(plain.tocsc(), np.concatenate([r, c]))
     K0 = K.copy()
-    elim = NodalElimination(K, B, c, ns.is_u_free)
+    elim = NodalElimination(K, B, c, ns.equations.is_u_free)
     Kp, bp = elim.system(r)
     assert Kp.shape == K.shape
     np.testing.assert_allclose(abs(Kp - Kp.T).max(), 0.0, atol=1e-12 * abs(Kp).max())
@@ -348,9 +350,9 @@ def test_a_guess_from_a_smaller_active_set_is_projected(swollen) -> None:
     B, c = _nodal_constraints(form, ns, K, m=15)
     c[10:] = 0.0  # the new points: at the skull (forced when a trial step crossed it)
     project = PatternProject()  # shared, as Newton's: the second puts K's values back
-    first = NodalElimination(K, B[:10], c[:10], ns.is_u_free, project)
+    first = NodalElimination(K, B[:10], c[:10], ns.equations.is_u_free, project)
     y1 = _direct(*first.system(r))
-    second = NodalElimination(K, B, c, ns.is_u_free, project)
+    second = NodalElimination(K, B, c, ns.equations.is_u_free, project)
     K2, b2 = second.system(r)
     defect = {name: np.linalg.norm(b2 - K2 @ y) / np.linalg.norm(b2)
               for name, y in (("raw", y1), ("projected", second.project(y1)))}

@@ -10,7 +10,11 @@ import pytest
 from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from brainbulge.solver.options import RezoningOptions
 from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
+
+#: rezoning after every accepted load step (a quality bound no triangle reaches)
+ALWAYS = SolverOptions(steps=4, rezoning=RezoningOptions(q_min=1.1))
 
 
 def test_rezoning_keeps_the_solution() -> None:
@@ -22,9 +26,8 @@ def test_rezoning_keeps_the_solution() -> None:
     fixed = MixedForm(hemidisk_problem(case))
     assert NewtonSolver(fixed, SolverOptions(steps=4)).solve().converged
     rezoning = Rezoning(lambda m: hemidisk_problem(case, m), geo.project, 0.1, 0.02,
-                        geo.singular_points(), q_min=1.1)
-    sol = solve_with_rezoning(hemidisk_problem(case), rezoning,
-                              options=SolverOptions(steps=4))
+                        geo.singular_points())
+    sol = solve_with_rezoning(hemidisk_problem(case), rezoning, options=ALWAYS)
     assert sol.converged and sol.rezones >= 2
     assert sol.form.mesh is not fixed.mesh
     pts = [(0.0, 0.99), (0.0, 0.5), (-0.3, 0.8), (0.4, 0.3)]
@@ -60,9 +63,9 @@ def test_a_failed_rezoning_goes_on_without_it() -> None:
         raise ConvergenceError("no projection")
 
     rezoning = Rezoning(lambda m: hemidisk_problem(case, m), refuse, 0.1, 0.02,
-                        geo.singular_points(), q_min=1.1)
+                        geo.singular_points())
     problem = hemidisk_problem(case)
-    sol = solve_with_rezoning(problem, rezoning, options=SolverOptions(steps=4))
+    sol = solve_with_rezoning(problem, rezoning, options=ALWAYS)
     assert sol.converged and sol.rezones == 0
     assert sol.form.mesh is problem.mesh
     assert sol.load == 1.0

@@ -23,7 +23,6 @@ from brainbulge.solver import NewtonSolver, SolverOptions
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Solution
 from brainbulge.solver.remesh.sequencing import (
-    FOLD_RATIO,
     interpolate_state,
     measure_ratio,
     press_onto_obstacles,
@@ -32,6 +31,8 @@ from brainbulge.solver.remesh.sequencing import (
 from contact_cases import _coords, _forms
 
 OPTIONS = SolverOptions(steps=2)
+FOLD_RATIO = OPTIONS.sequencing.fold_ratio
+COARSE_TOLERANCE = OPTIONS.sequencing.coarse_tolerance
 
 
 def _vertex_u(form: MixedForm) -> np.ndarray:
@@ -77,7 +78,7 @@ def test_carried_state_is_exact_for_affine_fields() -> None:
     pc_c = coarse.point_contacts[0]
     pc_c.lam = np.zeros(pc_c.n_points)  # nothing pressed: no projection onto the skull
     coarse.set_load(0.5)
-    interpolate_state(coarse, fine)
+    interpolate_state(coarse, fine, FOLD_RATIO)
 
     X = _coords(fine.mesh)
     inside = coarse.mesh(*X.T)["nr"] >= 0
@@ -108,7 +109,7 @@ def test_contact_pressures_and_pressed_points() -> None:
     coarse, fine = _forms()
     solver = NewtonSolver(coarse, OPTIONS)
     assert solver.solve().converged
-    interpolate_state(coarse, fine)
+    interpolate_state(coarse, fine, FOLD_RATIO)
     pc_c, pc_f = coarse.point_contacts[0], fine.point_contacts[0]
     pc_f.update(fine.gfu.vec.FV().NumPy())
     _, j = cKDTree(pc_c.x).query(pc_f.x)
@@ -143,13 +144,13 @@ def test_a_solved_coarse_form_is_carried_over_without_a_new_solve(ramp) -> None:
     csol = NewtonSolver(coarse, OPTIONS).solve()
     assert csol.converged
     x0 = coarse.gfu.vec.FV().NumPy().copy()
-    lam0 = [lam.copy() for lam in coarse.multiplier_state()]
+    lam0 = [pc.lam.copy() for pc in coarse.point_contacts]
     sol, record = solve_sequenced(coarse, fine, OPTIONS, coarse_solution=csol)
     assert sol.converged and record.fine_converged
     assert record.coarse_newton_iterations == csol.newton_iterations
     assert np.array_equal(coarse.gfu.vec.FV().NumPy(), x0)
-    assert all(np.array_equal(a, b) for a, b in zip(coarse.multiplier_state(), lam0,
-                                                     strict=True))
+    assert all(np.array_equal(pc.lam, b) for pc, b in zip(coarse.point_contacts, lam0,
+                                                           strict=True))
     u_ref = _vertex_u(fine_ref)
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
 
@@ -172,7 +173,7 @@ def test_sequencing_falls_back_to_the_ramp(ramp, monkeypatch) -> None:
 def test_sequencing_needs_the_mini_element() -> None:
     coarse, fine = _forms(element="taylor-hood")
     with pytest.raises(InputError, match="MINI"):
-        interpolate_state(coarse, fine)
+        interpolate_state(coarse, fine, FOLD_RATIO)
 
 
 def test_equilibrate_restores_the_state_when_newton_fails() -> None:
@@ -180,7 +181,7 @@ def test_equilibrate_restores_the_state_when_newton_fails() -> None:
     reports the failure and leaves the state and contact pressures as they were."""
     coarse, fine = _forms()
     assert NewtonSolver(coarse, OPTIONS).solve().converged
-    interpolate_state(coarse, fine)
+    interpolate_state(coarse, fine, FOLD_RATIO)
     x0 = fine.gfu.vec.FV().NumPy().copy()
     lam0 = fine.point_contacts[0].lam.copy()
     solver = NewtonSolver(fine, SolverOptions(max_iterations=1))
@@ -198,22 +199,22 @@ def test_equilibrate_adds_the_contact_curvature_once_the_residual_is_small(ramp)
     fine_ref, _ = ramp
     coarse, fine = _forms()
     assert NewtonSolver(coarse, OPTIONS).solve().converged
-    interpolate_state(coarse, fine)
+    interpolate_state(coarse, fine, FOLD_RATIO)
     probe = NewtonSolver(fine, OPTIONS)
-    tol = 0.1 * probe.scaled_norm(probe.residual(fine.gfu.vec))
+    tol = 0.1 * probe.equations.scaled_norm(probe.equations.residual(fine.gfu.vec))
     solver = NewtonSolver(fine, SolverOptions(steps=2, carried_curvature_tolerance=tol))
     calls: list[tuple[float, bool]] = []
-    tangent = solver.tangent
+    tangent = solver.equations.tangent
 
-    def spy(x: ngs.BaseVector):
-        calls.append((solver.history[-1][-1], solver.with_curvature))
-        return tangent(x)
+    def spy(x: ngs.BaseVector, curvature: bool = True):
+        norm = solver.equations.scaled_norm(solver.equations.res.FV().NumPy())
+        calls.append((norm, curvature))
+        return tangent(x, curvature)
 
-    solver.tangent = spy
+    solver.equations.tangent = spy
     assert solver.equilibrate().converged
     assert all(on == (norm <= tol) for norm, on in calls)
     assert {on for _, on in calls} == {False, True}
-    assert solver.with_curvature  # back to the exact tangent for later solves
     u_ref = _vertex_u(fine_ref)
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
 
@@ -222,11 +223,10 @@ def test_the_coarse_stage_stops_at_its_own_tolerance() -> None:
     """The coarse state is only a start: its Newton stops at COARSE_TOLERANCE (fewer
     iterations than at the requested tolerance), the fine mesh's at the requested
     tolerance; both read off the states left on the two meshes."""
-    from brainbulge.solver.remesh.sequencing import COARSE_TOLERANCE
 
     def residual(form: MixedForm) -> float:
         ns = NewtonSolver(form, OPTIONS)
-        return ns.scaled_norm(ns.residual(form.gfu.vec))
+        return ns.equations.scaled_norm(ns.equations.residual(form.gfu.vec))
 
     coarse, fine = _forms()
     sol, record = solve_sequenced(coarse, fine, OPTIONS)
@@ -273,7 +273,7 @@ def test_moves_onto_the_obstacle_that_fold_elements_are_undone() -> None:
     pc.update(moved_alone)
     pc.move_onto_obstacle(moved_alone, pc.lam > 0)
     assert measure_ratio(X, els, moved_alone[vd]).min() < 0  # the kinked move folds
-    press_onto_obstacles(fine, X, els)
+    press_onto_obstacles(fine, X, els, FOLD_RATIO)
     J = measure_ratio(X, els, x[vd])
     assert J.min() >= FOLD_RATIO
     assert np.all(x[vd[pc.vertices[i]]] == 0.0)  # the folding move undone

@@ -13,6 +13,9 @@ hundred tets.
 After an accepted Newton step, with ``r_v`` the scaled residual of the DOFs at vertex ``v``
 (displacements / ``mu L^(d-1)``, pressures / ``|Omega|``, as the Newton norm scales them):
 
+(``share``, ``max_vertices``, ``rings`` and the local Newton's ``max_iterations`` are
+``SolverOptions.hotspot``, :class:`~brainbulge.solver.options.HotspotOptions`)
+
 - hotspot ``H``: the fewest vertices with ``sum_H r_v^2 >= share sum_v r_v^2``, if at most
   ``max_vertices``; else nothing is done (a residual spread over the body is Newton's job);
 - patch ``P``: ``H`` and ``rings`` rings of neighbours, without vertices held by the skull
@@ -41,6 +44,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_dofs
+from brainbulge.solver.options import HotspotOptions
 
 log = logging.getLogger("brainbulge")
 
@@ -61,15 +65,16 @@ class RelaxationRecord:
 
 
 class HotspotRelaxation:
-    """Local Newton on the residual hotspot of a :class:`NewtonSolver`'s MINI form."""
+    """Local Newton on the residual hotspot of a MINI form's equations
+    (:class:`~brainbulge.solver.equations.MixedEquations`)."""
 
-    def __init__(self, solver, share: float = 0.5, max_vertices: int = 16, rings: int = 2,
-                 max_iterations: int = 30) -> None:
+    def __init__(self, solver, options: HotspotOptions | None = None) -> None:
+        options = options or HotspotOptions()
         self.solver = solver
-        self.share = share
-        self.max_vertices = max_vertices
-        self.rings = rings
-        self.max_iterations = max_iterations
+        self.share = options.share
+        self.max_vertices = options.max_vertices
+        self.rings = options.rings
+        self.max_iterations = options.max_iterations
         self.records: list[RelaxationRecord] = []
         self.last_patch = np.zeros(0, dtype=bool)  # the vertices of the last patch
         self.last_dofs = np.zeros(0, dtype=np.int64)  # and the DOFs of its local solve
@@ -190,8 +195,7 @@ class HotspotRelaxation:
         patch = problem.patch
         self.last_dofs = problem.dofs
         X = x.FV().NumPy()
-        x_saved = X.copy()
-        lam_saved = [pc.lam.copy() for pc in pcs]
+        saved = s.state.snapshot()
         res_saved, compl_saved = s.res.FV().NumPy().copy(), s.contact.complementarity
         its = problem.solve(X, target=0.01 * norm, max_iterations=self.max_iterations)
         new = s.scaled_norm(s.residual(x))
@@ -206,9 +210,8 @@ class HotspotRelaxation:
                   "" if kept else ", not kept")
         if kept:
             return new
-        X[:] = x_saved  # and the residual at it, without evaluating it again
-        for pc, lam in zip(pcs, lam_saved, strict=True):
-            pc.lam = lam
+        s.state.restore(saved)  # and the residual at it, without evaluating it again
+        for pc in pcs:
             pc.update(X)
         s.res.FV().NumPy()[:] = res_saved
         s.contact.complementarity = compl_saved

@@ -5,12 +5,15 @@ in :mod:`.amg`); both read the tangent through the sparsity-pattern plans of
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse as sp
 
 from brainbulge.errors import InputError
+
+if TYPE_CHECKING:
+    from brainbulge.solver.options import KrylovOptions
 
 
 class SolveStats(Protocol):
@@ -41,9 +44,10 @@ class LinearSolver(Protocol):
         ...
 
 
-def make_linear_solver(name: str = "pardiso", form=None, **krylov) -> LinearSolver:
+def make_linear_solver(name: str = "pardiso", form=None, krylov: KrylovOptions | None = None
+                       ) -> LinearSolver:
     """``"pardiso"`` (direct, default) or ``"krylov"`` (GMRES preconditioned by blocks
-    built from ``form``'s spaces; ``krylov``: its keyword arguments, e.g. ``maxiter``)."""
+    built from ``form``'s spaces; ``krylov``: its budget, restart and AMG refresh)."""
     if name == "pardiso":
         from brainbulge.solver.linear.direct import PardisoSolver
 
@@ -51,5 +55,5 @@ def make_linear_solver(name: str = "pardiso", form=None, **krylov) -> LinearSolv
     if name == "krylov":
         from brainbulge.solver.linear.krylov import BlockKrylovSolver
 
-        return BlockKrylovSolver.from_form(form, **krylov)
+        return BlockKrylovSolver.from_form(form, krylov)
     raise InputError(f"unknown linear solver {name!r}; choose 'pardiso' or 'krylov'")

@@ -51,6 +51,7 @@ from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.solver.linear.amg import AMGCycle, HierarchicalTwoLevel
 from brainbulge.solver.linear.layout import DisplacementLayout, displacement_layout, free_dofs
 from brainbulge.solver.linear.sparse_reuse import PatternGather, canonical
+from brainbulge.solver.options import KrylovOptions
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
@@ -90,13 +91,9 @@ class BlockKrylovSolver:
         is_u: (n_free,) True at displacement DOFs among the free DOFs.
         layout: vertex and component of each free displacement DOF (for the rigid-body
             near-nullspace and the node blocks of the AMG).
+        krylov: the iteration budget per solve (all restarts included), the restart length
+            and the AMG refresh factor (:class:`~brainbulge.solver.options.KrylovOptions`).
         rtol: default relative tolerance on the true residual ``|r - K x| / |r|``.
-        maxiter: GMRES iteration budget per solve (all restarts included).
-        restart: GMRES restart length (basis vectors kept: 1.7 GB at 1.08M unknowns). With
-            100, the 1.40M-tet brain's fine-stage tangent with the contacts' curvature term
-            stalled at 5.6e-2 after 200 iterations; it converges in 157 without a restart.
-        refresh_factor: rebuild the AMG when a solve takes more than this times the
-            iterations of the first solve after the last setup.
         amg: extra keyword arguments for ``pyamg.smoothed_aggregation_solver`` (both blocks).
 
     Attributes:
@@ -105,9 +102,10 @@ class BlockKrylovSolver:
         amg_p: the AMG cycle approximating ``S~^-1``.
     """
 
-    def __init__(self, is_u: np.ndarray, layout: DisplacementLayout, rtol: float = 1e-8,
-                 maxiter: int = 1000, restart: int = 200, refresh_factor: float = 1.5,
+    def __init__(self, is_u: np.ndarray, layout: DisplacementLayout,
+                 krylov: KrylovOptions | None = None, rtol: float = 1e-8,
                  amg: dict | None = None) -> None:
+        krylov = krylov or KrylovOptions()
         self.is_u = np.asarray(is_u, dtype=bool)
         self.iu = np.flatnonzero(self.is_u)
         self.ip = np.flatnonzero(~self.is_u)
@@ -115,9 +113,9 @@ class BlockKrylovSolver:
             raise InputError("layout and is_u disagree on the number of displacement DOFs")
         self.layout = layout
         self.rtol = rtol
-        self.maxiter = maxiter
-        self.restart = restart
-        self.refresh_factor = refresh_factor
+        self.maxiter = krylov.max_iterations
+        self.restart = krylov.restart
+        self.refresh_factor = krylov.refresh_factor
         self._schur_stale = True  # S~ to be rebuilt at the next solve
         self.stats = KrylovStats()
         self._ref_iterations: int | None = None
@@ -140,12 +138,14 @@ class BlockKrylovSolver:
         self.amg_p = AMGCycle(len(self.ip), np.arange(len(self.ip)), 1, None, amg or {})
 
     @classmethod
-    def from_form(cls, form, **options) -> BlockKrylovSolver:
-        """Everything the constructor needs, from a MINI or Taylor-Hood :class:`MixedForm`."""
+    def from_form(cls, form, krylov: KrylovOptions | None = None, **options
+                  ) -> BlockKrylovSolver:
+        """Everything the constructor needs, from a MINI or Taylor-Hood :class:`MixedForm`;
+        ``krylov`` and ``options`` as the constructor's."""
         free = free_dofs(form)
         rng = form.fes.Range(0)
         is_u = (free >= rng.start) & (free < rng.stop)
-        return cls(is_u, displacement_layout(form, free), **options)
+        return cls(is_u, displacement_layout(form, free), krylov, **options)
 
     # --- set-up and reuse ----------------------------------------------------------------
     def _blocks(self, K: sp.csr_matrix) -> tuple[np.ndarray, sp.csr_matrix, sp.csr_matrix]:

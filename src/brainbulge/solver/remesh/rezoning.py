@@ -8,11 +8,13 @@ the deformed domain is meshed afresh and pulled back to the reference configurat
 and the ramp goes on from the same load. The material is hyperelastic, so the converged
 state at a load does not depend on the mesh history: rezoning changes the discretisation,
 not the problem. The carried-over state is first equilibrated at the same load (in at most
-:data:`EQUILIBRATION_ITERATIONS` Newton iterations); if that (or the
+``equilibration_iterations`` Newton iterations); if that (or the
 remeshing) fails, the old mesh keeps its converged state and the ramp goes on there without
 rezoning. That old mesh may itself be a rezoned one, so a run can end earlier than the plain
 ramp on the first mesh would: sliding alpha 80 / beta 30 reaches load 0.62 with rezoning and
-0.77 without it (docs/known-limits.md).
+0.77 without it (docs/known-limits.md). ``q_min``, ``equilibration_iterations`` and
+``max_rezones`` are ``SolverOptions.rezoning``
+(:class:`~brainbulge.solver.options.RezoningOptions`).
 """
 
 from __future__ import annotations
@@ -37,21 +39,11 @@ from brainbulge.geometry.rezone import (
 from brainbulge.model.problem import Problem
 from brainbulge.solver.contact.points import edge_bubble_midpoint_value
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.newton import Newton
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
 from brainbulge.solver.remesh.sequencing import carry_contact_pressures
 
 log = logging.getLogger("brainbulge")
-
-#: rezone when the smallest deformed triangle quality falls below this [-]
-Q_MIN = 0.2
-
-#: Newton iterations allowed to equilibrate a carried-over state on the new mesh before the
-#: rezoning counts as failed. The carried-over residual comes from interpolation only; in the
-#: sector study each rezoning that succeeded converged from 3e-2-5e-2 to below 1e-9 in 4
-#: iterations, each that failed still stood at 3e-4-1e-2 after 14-20 (10-15 s of a run).
-EQUILIBRATION_ITERATIONS = 8
 
 
 @dataclasses.dataclass
@@ -68,8 +60,6 @@ class Rezoning:
     corners: Sequence[tuple[float, float]]
     rim_points: np.ndarray | None = None
     h_rim: float | None = None
-    q_min: float = Q_MIN
-    max_rezones: int = 50
 
 
 def solve_with_rezoning(
@@ -88,7 +78,7 @@ def solve_with_rezoning(
     failed = ""  # why the last rezoning failed: then the ramp goes on without it
     while True:
         def degenerate(f: MixedForm = form) -> bool:
-            return float(deformed_quality(f.mesh, f.u).min()) < rezoning.q_min
+            return float(deformed_quality(f.mesh, f.u).min()) < options.rezoning.q_min
 
         def moved(t_now: float, t_mesh: float = t) -> bool:
             return t_now > t_mesh + 1e-9  # a failure on a mesh that has deformed since
@@ -98,7 +88,7 @@ def solve_with_rezoning(
         solver = NewtonSolver(form, dataclasses.replace(options, start_load=t, **hooks))
         sol = solver.solve()
         total = sol if total is None else _merged(total, sol)
-        if sol.converged or rezones >= rezoning.max_rezones:
+        if sol.converged or rezones >= options.rezoning.max_rezones:
             break
         if not sol.stopped_early:
             break  # failed on a fresh mesh: rezoning cannot help
@@ -109,18 +99,19 @@ def solve_with_rezoning(
                         rezoning.corners, rezoning.rim_points, rezoning.h_rim)
             new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
             transfer_state(form, new, rz)
-            new_solver = Newton(
-                new, dataclasses.replace(options, max_iterations=EQUILIBRATION_ITERATIONS))
+            new_solver = NewtonSolver(
+                new, dataclasses.replace(
+                    options, max_iterations=options.rezoning.equilibration_iterations))
             new.set_load(sol.load)
             # equilibrate the carried-over state on the new mesh before the ramp goes on
-            r0 = new_solver.scaled_norm(new_solver.residual(new.gfu.vec))
-            ok, its, norm = new_solver.newton(new.gfu.vec)
+            res = new_solver.newton()
+            its = res.iterations
             log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
-                     sol.load, r0, norm, its)
-            if not ok:
+                     sol.load, res.residuals[0], res.norm, its)
+            if not res.converged:
                 raise ConvergenceError(f"the carried-over state did not equilibrate "
-                                       f"(|R| = {norm:.2e} after {its} iterations: "
-                                       f"{new_solver.failure_reason})")
+                                       f"(|R| = {res.norm:.2e} after {its} iterations: "
+                                       f"{res.detail})")
         except (ConvergenceError, RuntimeError, NgException) as exc:
             # the old mesh keeps the last converged state; go on there without rezoning
             failed = f"rezoning at load {sol.load:.4f} failed: {exc}"
@@ -165,10 +156,8 @@ def _merged(a: Solution, b: Solution) -> Solution:
     """``b`` continuing ``a`` (steps, counts and times added)."""
     b.steps = a.steps + b.steps
     b.rejected_steps += a.rejected_steps
-    b.assembly_time_s += a.assembly_time_s
-    b.solve_time_s += a.solve_time_s
-    b.linear_iterations += a.linear_iterations
-    return b
+    b.newton_results = a.newton_results + b.newton_results
+    return Costs().add(b).add(a).into(b)
 
 
 def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:

@@ -56,7 +56,7 @@ from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordina
 from brainbulge.geometry.rezone import vertex_values
 from brainbulge.solver.contrast import equilibrate_through_contrast
 from brainbulge.solver.mixed import MixedForm
-from brainbulge.solver.options import Solution, SolverOptions
+from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
 
 log = logging.getLogger("brainbulge")
@@ -75,9 +75,10 @@ class Sequenced:
     fine_converged: bool  # Newton from the carried-over state (else the plain ramp ran)
 
 
-def interpolate_state(old: MixedForm, new: MixedForm) -> None:
+def interpolate_state(old: MixedForm, new: MixedForm, fold_ratio: float) -> None:
     """Carry ``(u, p, lambda)`` and the load of ``old`` over to ``new``, a mesh of the same
-    reference domain (see the module docstring)."""
+    reference domain (see the module docstring); ``fold_ratio``: that of
+    :func:`press_onto_obstacles`."""
     if new.element != "mini" or old.element != "mini":
         raise InputError("mesh sequencing needs the MINI element (P1 + bubble / P1)")
     if old.pressure_zones != new.pressure_zones:
@@ -118,16 +119,12 @@ def interpolate_state(old: MixedForm, new: MixedForm) -> None:
         pvec = new.gfu.components[1 + k].vec.FV().NumPy()
         pvec[vertex_dofs(new.fes.components[1 + k], mesh, in_zone)[verts, 0]] = p
     carry_contact_pressures(old, new)
-    press_onto_obstacles(new, X, els)
+    press_onto_obstacles(new, X, els, fold_ratio)
     new.set_load(old.load.Get())  # prescribed values exact again
 
 
-#: a vertex moved onto the obstacle goes back if an element of it is left with less than this
-#: fraction of its reference measure (and less than before the move)
-FOLD_RATIO = 0.2
-
-
-def press_onto_obstacles(form: MixedForm, X: np.ndarray, els: np.ndarray) -> None:
+def press_onto_obstacles(form: MixedForm, X: np.ndarray, els: np.ndarray,
+                         fold_ratio: float) -> None:
     """Move the points of ``form``'s state that carry contact pressure onto their obstacle
     (three projections along the normal), then take back the moves that fold an element.
 
@@ -136,7 +133,8 @@ def press_onto_obstacles(form: MixedForm, X: np.ndarray, els: np.ndarray) -> Non
     the fine mesh's points there lie up to 1.6 mm inside the rounding, close to where its
     signed distance's gradient jumps, so neighbours are pushed apart in different directions
     (18 folded tets at 1.40M). An element whose measure ratio ``J`` falls below
-    :data:`FOLD_RATIO` (and below its value before the move) gets its vertices' moves undone,
+    ``fold_ratio`` (:class:`~brainbulge.solver.options.SequencingOptions`; and below its
+    value before the move) gets its vertices' moves undone,
     repeatedly until none does; those points start inside the obstacle and Newton's active
     set closes the gap.
     """
@@ -152,7 +150,7 @@ def press_onto_obstacles(form: MixedForm, X: np.ndarray, els: np.ndarray) -> Non
     undone = 0
     while True:
         J = measure_ratio(X, els, gvec[vd])
-        verts = np.unique(els[(J < FOLD_RATIO) & (J < J0)])
+        verts = np.unique(els[(J < fold_ratio) & (J < J0)])
         moved = verts[np.any(gvec[vd[verts]] != before[vd[verts]], axis=1)]
         if not len(moved):
             break
@@ -182,15 +180,6 @@ def carry_contact_pressures(old: MixedForm, new: MixedForm) -> None:
         pc_new.lam = pc_old.lam[idx].copy()
 
 
-#: the coarse stage's Newton tolerance (scaled residual; the intermediate loads' too, which
-#: are never tighter): its state is only where the fine mesh starts, whose carried-over
-#: residual is ~1e-2 (the interpolation's; 1.7e-2 at 1.40M from 111k tets, the same to four
-#: digits from a coarse state at 1e-7), so converging it further buys nothing. The 111k
-#: coarse ramp: 6 Newton iterations instead of 9 (load 0.25 accepted at the undeformed
-#: state, |R| 8.5e-5; 0.625 in 4, 1.0 in 2)
-COARSE_TOLERANCE = 1e-4
-
-
 def solve_sequenced(
     coarse: MixedForm, fine: MixedForm, options: SolverOptions,
     coarse_solution: Solution | None = None,
@@ -202,12 +191,14 @@ def solve_sequenced(
     contrast steps in one record) and the coarse stage's record; the linear solvers' memory
     is released.
     ``options`` apply to both meshes (the coarse one without restart file or progress bar,
-    and to :data:`COARSE_TOLERANCE`). ``coarse_solution``: ``coarse`` already holds this
-    solution (e.g. the previous member of a mesh family), so it is not solved again."""
+    and to ``options.sequencing.coarse_tolerance``). ``coarse_solution``: ``coarse`` already
+    holds this solution (e.g. the previous member of a mesh family), so it is not solved
+    again."""
     t0 = time.perf_counter()
     if coarse_solution is None:
         coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False,
-                                         tolerance=max(options.tolerance, COARSE_TOLERANCE))
+                                         tolerance=max(options.tolerance,
+                                                       options.sequencing.coarse_tolerance))
         coarse_solver = NewtonSolver(coarse, coarse_opt)
         csol = coarse_solver.solve()
         coarse_solver.release_linear_solver()
@@ -220,7 +211,7 @@ def solve_sequenced(
     if csol.converged:
         def carry(form: MixedForm) -> None:
             t1 = time.perf_counter()
-            interpolate_state(coarse, form)
+            interpolate_state(coarse, form, options.sequencing.fold_ratio)
             record.transfer_time_s = time.perf_counter() - t1
 
         sol, record.initial_residual = equilibrate_through_contrast(fine, options, carry)
@@ -232,10 +223,8 @@ def solve_sequenced(
     else:
         log.warning("  the coarse mesh stopped at load %.4f (%s); ramping the load on the "
                     "fine mesh from Js = 1", csol.load, csol.message)
-    fine.gfu.vec[:] = 0.0
-    fine.restore_multipliers([np.zeros_like(v) for v in fine.multiplier_state()])
-    fine.set_load(0.0)
     solver = NewtonSolver(fine, options)
+    solver.state.reset()
     sol = solver.solve()
     solver.release_linear_solver()
     return _with_coarse_costs(sol, csol, t0), record
@@ -245,7 +234,4 @@ def _with_coarse_costs(sol: Solution, coarse: Solution, t0: float) -> Solution:
     """``sol`` with the wall time since ``t0`` and the coarse stage's assembly, linear-solve
     and Krylov counts added (its Newton iterations stay the fine mesh's own)."""
     sol.wall_time_s = time.perf_counter() - t0
-    sol.assembly_time_s += coarse.assembly_time_s
-    sol.solve_time_s += coarse.solve_time_s
-    sol.linear_iterations += coarse.linear_iterations
-    return sol
+    return Costs().add(sol).add(coarse).into(sol)
