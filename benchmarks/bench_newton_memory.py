@@ -123,14 +123,14 @@ def held_mb(root, seen: set[int] | None = None) -> float:
     return total / 2**20
 
 
-def held_table(ns) -> str:
-    """What the Newton solver's parts hold after the last iteration (MB, shared arrays
+def held_table(eq) -> str:
+    """What the Newton equations' parts hold after the last iteration (MB, shared arrays
     counted at their first owner)."""
     seen: set[int] = set()
-    lin = ns.linear
-    parts = [("closed-form tangent (pattern, bubble operators)", ns.closed),
-             ("free-part plan", ns._free_part),
-             ("contact elimination plan", ns._project_elimination),
+    lin = eq.linear
+    parts = [("closed-form tangent (pattern, bubble operators)", eq.closed),
+             ("free-part plan", eq._free_part),
+             ("contact elimination plan", eq._project_elimination),
              ("Krylov block plans", lin._block_plans),
              ("displacement AMG (plan, hierarchy)", lin.amg_u),
              ("Schur AMG", lin.amg_p)]
@@ -171,17 +171,18 @@ def main() -> None:
                                           linear_solver="krylov",
                                           max_iterations=args.iterations))
     peaks.mark("residual, line search")
-    peaks.wrap(ns, "tangent", "tangent", "linear system")
-    peaks.wrap(ns.linear, "setup", "AMG set-up", "linear system")
-    peaks.wrap(ns.linear, "_krylov", "GMRES", "residual, line search")
+    eq = ns.equations
+    peaks.wrap(eq, "tangent", "tangent", "linear system")
+    peaks.wrap(eq.linear, "setup", "AMG set-up", "linear system")
+    peaks.wrap(eq.linear, "_krylov", "GMRES", "residual, line search")
     form.set_load(1.0 / case.steps)
-    ns.newton(form.gfu.vec, ns.opt.intermediate_tolerance)
+    result = ns.newton(ns.opt.intermediate_tolerance)
     peaks.mark("end")
-    print(f"{form.mesh.ne:,} tets, {len(ns.free):,} free DOFs\n")
+    print(f"{form.mesh.ne:,} tets, {len(eq.free):,} free DOFs\n")
     print(peaks.table())
-    print(held_table(ns))
-    print("Newton |R|:", " ".join(f"{r:.6e}" for r in ns.history[-1]))
-    print("GMRES iterations:", ns.linear.stats.iterations)
+    print(held_table(eq))
+    print("Newton |R|:", " ".join(f"{r:.6e}" for r in result.residuals))
+    print("GMRES iterations:", eq.linear.stats.iterations)
 
 
 if __name__ == "__main__":
