@@ -27,12 +27,11 @@ from brainbulge.cli import main
 from brainbulge.errors import InputError
 from brainbulge.results.records.output_folder import LOCK_FILE, claim_output_dir, read_manifest
 from brainbulge.results.records.run_record import atomic_write_json
+from fake_results import SUMMARY, one_line
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
 FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
-SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
-           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0}
 
 
 def fake_run(files: dict[str, bytes], error: BaseException | None = None):
@@ -57,11 +56,6 @@ def fake_run(files: dict[str, bytes], error: BaseException | None = None):
 def status(out: Path) -> dict:
     return json.loads((out / "status.json").read_text())
 
-
-def one_line(capsys) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    return err[0]
 
 
 # --------------------------------------------------------------------------- manifest

@@ -23,18 +23,10 @@ from brainbulge.atomic import atomic_output
 from brainbulge.cli import checks, main
 from brainbulge.errors import InputError
 from brainbulge.results.records.output_folder import claim_output_dir, read_manifest
+from fake_results import BRAIN, SUMMARY, one_line
 
 FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
-SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
-           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0}
-BRAIN = {"swelling_reached": 1.1, "max_displacement": 1.0, "midline_shift_mm": 0.1,
-         "bulge_volume_ml": 10.0, "max_principal_strain": 0.1, "max_penetration_mm": 0.0}
 
-
-def one_line(capsys) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    return err[0]
 
 
 def contents(folder: Path) -> dict[str, bytes]:

@@ -26,16 +26,10 @@ import brainbulge.studies.suites as suites
 from brainbulge.atomic import atomic_output
 from brainbulge.cli import main
 from brainbulge.studies.runner import _read_json, _readable, run_study
+from fake_results import one_line
 
 STUDY = ["study", "hemidisk-sector", "--alphas", "20", "--betas", "30"]
-SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
-           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0}
 
-
-def one_line(capsys) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    return err[0]
 
 
 @contextlib.contextmanager

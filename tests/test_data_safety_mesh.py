@@ -15,12 +15,7 @@ import numpy as np
 import pytest
 
 from brainbulge.cli import main
-
-
-def one_line(capsys) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0] and "internal" not in err[0], err
-    return err[0]
+from fake_results import one_line
 
 
 @pytest.fixture(scope="module")
