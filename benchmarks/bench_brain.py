@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import time
@@ -51,6 +50,7 @@ from pathlib import Path
 
 from brainbulge.geometry.brain.skull import EDGE_RADIUS_MM
 from brainbulge.runtime import configure as configure_runtime
+from memory import peak_mb
 
 VARIANTS = {
     "baseline": {"element": "taylor-hood", "linear_solver": "pardiso", "compile": False},
@@ -126,7 +126,7 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         "assembly_s": s["assembly_time_s"], "linear_s": s["linear_solve_time_s"],
         "newton": s["newton_iterations"], "steps": s["load_steps"],
         "linear_its": s["linear_iterations"], "run_s": t_run, "converged": s["converged"],
-        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "peak_mb": peak_mb(),
         "shift_mm": s["midline_shift_mm"], "bulge_ml": s["bulge_volume_ml"],
         "penetration_mm": s["max_penetration_mm"], "variant": variant,
         # the solver's word: a restart file of another problem is not resumed

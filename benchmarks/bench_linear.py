@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from brainbulge.runtime import configure as configure_runtime
+from memory import peak_mb, status_mb
 
 #: Krylov variants: the product's SIMPLE Schur approximation, and for comparison an AMG
 #: cycle on the pressure mass weighted by 1/mu (or by one 1/mu_max) plus C.
@@ -155,17 +155,6 @@ def brain_system(tets: int, cache: Path, load: float, out: Path) -> dict:
 
 
 # --- one solver in a fresh process ----------------------------------------------------
-def _rss_mb() -> float:
-    """Peak resident memory of this process [MB]."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
-def _status_mb(key: str) -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(key + ":"):
-                return float(line.split()[1]) / 1024
-    return float("nan")
 
 
 def _reset_peak() -> float:
@@ -175,7 +164,7 @@ def _reset_peak() -> float:
             f.write("5")
     except OSError:
         pass
-    return _status_mb("VmRSS")
+    return status_mb("VmRSS")
 
 
 def worker(folder: Path, variant: str, rtol: float) -> dict:
@@ -222,8 +211,8 @@ def worker(folder: Path, variant: str, rtol: float) -> dict:
     if ref_path.exists():
         xd = np.load(ref_path)
         row["err"] = float(np.linalg.norm(x - xd) / np.linalg.norm(xd))
-    row["peak_mb"] = _rss_mb()
-    row["extra_mb"] = _status_mb("VmHWM") - base
+    row["peak_mb"] = peak_mb()
+    row["extra_mb"] = status_mb("VmHWM") - base
     return row
 
 

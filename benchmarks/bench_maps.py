@@ -15,11 +15,11 @@ and the peak resident memory.
 from __future__ import annotations
 
 import argparse
-import resource
 import time
 from pathlib import Path
 
 from brainbulge.runtime import configure as configure_runtime
+from memory import peak_mb
 
 
 def main() -> None:
@@ -83,9 +83,9 @@ def main() -> None:
     t = time.perf_counter()
     save_nifti(img, args.cache / "one.nii.gz")
     rows["of which one float32 map written (gzip)"] = time.perf_counter() - t
-    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = peak_mb()
     print(f"{len(bm.tets):,} tets, grid {bm.image_grid.shape}, {len(hits.index):,} voxels "
-          f"located, peak {peak_mb:,.0f} MB")
+          f"located, peak {peak:,.0f} MB")
     print("| part | s |\n|---|---|")
     for name, seconds in rows.items():
         print(f"| {name} | {seconds:.1f} |")

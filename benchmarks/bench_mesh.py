@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import time
 
 from brainbulge.runtime import configure as configure_runtime
+from memory import peak_mb
 
 
 def one(target_tets: int, refinements: int = 0) -> dict:
@@ -33,7 +33,7 @@ def one(target_tets: int, refinements: int = 0) -> dict:
     return {
         "target": target_tets, "tets": q["tets"], "nodes": q["nodes"], "total_s": total,
         **{f"{k}_s": v for k, v in mesh.timings_s.items()},
-        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "peak_mb": peak_mb(),
         "min_dihedral_deg": q["min_dihedral_deg"], "below_10deg": q["tets_below_10deg"],
         "inverted": q["inverted_tets"], "max_volume_error": rel,
         "flap_cm2": {n: round(mesh.flap_area_cm2(n), 1) for n in mesh.flaps},

@@ -31,14 +31,7 @@ import tracemalloc
 from pathlib import Path
 
 from brainbulge.runtime import configure as configure_runtime
-
-
-def _status_mb(key: str) -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(key + ":"):
-                return float(line.split()[1]) / 1024
-    return float("nan")
+from memory import status_mb
 
 
 class PhasePeaks:
@@ -60,7 +53,7 @@ class PhasePeaks:
         """End the current phase (its peak and end RSS), start ``next_label``."""
         t = time.perf_counter()
         live, live_peak = (v / 2**20 for v in tracemalloc.get_traced_memory())
-        self.rows.append((self.label, _status_mb("VmHWM"), _status_mb("VmRSS"), t - self.t0,
+        self.rows.append((self.label, status_mb("VmHWM"), status_mb("VmRSS"), t - self.t0,
                           live_peak, live))
         self.label, self.t0 = next_label, t
         self._reset()

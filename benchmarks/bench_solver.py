@@ -8,7 +8,6 @@ peak memory and the radial-map error. Rerun with ``python benchmarks/bench_solve
 from __future__ import annotations
 
 import argparse
-import resource
 import time
 
 import ngsolve as ngs
@@ -19,6 +18,7 @@ from brainbulge.materials import MooneyRivlin
 from brainbulge.model import Problem
 from brainbulge.runtime import configure as configure_runtime
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+from memory import peak_mb
 
 A, JS = 0.2, 1.3
 
@@ -59,7 +59,7 @@ def run(h: float, element: str) -> dict:
         "assembly_s_per_it": solver.t_assembly / its,
         "solve_s_per_it": solver.t_solve / its,
         "wall_s": wall,
-        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "peak_mb": peak_mb(),
         "radius_error": abs(r - exact) / exact,
         "u_L2_error": float(np.sqrt(err / ref)),
         "converged": sol.converged,
