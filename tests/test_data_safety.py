@@ -242,6 +242,38 @@ def test_sigterm_ends_child_processes_and_leaves_a_true_status(tmp_path, signum)
     assert not (out / LOCK_FILE).exists() and "fields.png" in read_manifest(out)
 
 
+DROPPED = ("import os, signal, sys, time, weakref\n"
+           "import brainbulge.studies.hemidisk as hd\n"
+           "from brainbulge.cli import main\n"
+           "class Thing: pass\n"
+           "def finaliser(ref):\n"
+           "    os.kill(os.getpid(), signal.SIGTERM)\n"
+           "    for _ in range(10000): pass  # the handler runs here, inside the callback\n"
+           "def slow(case, out, progress=False):\n"
+           "    thing = Thing()\n"
+           "    ref = weakref.ref(thing, finaliser)\n"
+           "    del thing\n"
+           "    time.sleep(120)\n"
+           "hd.run_hemidisk = slow\n"
+           "sys.exit(main(sys.argv[1:]))\n")
+
+
+def test_a_stop_that_lands_in_a_finaliser_still_stops_the_run(tmp_path) -> None:
+    """Python drops an exception raised inside a finaliser (a weakref callback, ``__del__``):
+    a signal that arrives there must still end the run, in one line."""
+    out = tmp_path / "out"
+    run = subprocess.Popen([sys.executable, "-c", DROPPED, *FAST, "--out", str(out)], env=ENV,
+                           stderr=subprocess.PIPE, text=True)
+    try:
+        _, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+    assert run.returncode == 130, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("interrupted: "), err
+    assert status(out)["message"] == "stopped by SIGTERM"
+
+
 QUICK = ("import sys\n"
          "import brainbulge.studies.hemidisk as hd\n"
          "from brainbulge.cli import main\n"

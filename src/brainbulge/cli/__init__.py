@@ -128,6 +128,8 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     configure_runtime()  # threads, MKL, heap, compiler cache: before NGSolve loads
     _RUN = _Run()
     previous = {signum: _on_signal(signum, _raise_terminated) for signum in STOP_SIGNALS}
+    previous_alarm, previous_unraisable = signal.getsignal(signal.SIGALRM), sys.unraisablehook
+    sys.unraisablehook = _dropped_stop
     try:
         return int(args.func(args) or 0)
     except BrainbulgeError as err:
@@ -159,6 +161,10 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     finally:
         for signum, handler in previous.items():
             _on_signal(signum, handler)
+        sys.unraisablehook = previous_unraisable
+        if signal.getsignal(signal.SIGALRM) is not previous_alarm:  # a dropped stop re-asked
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, previous_alarm or signal.SIG_DFL)
         _release()
 
 
@@ -196,6 +202,18 @@ def _os_message(err: OSError) -> str:
 
 def _raise_terminated(signum: int, frame: Any) -> None:
     raise Terminated(signum)
+
+
+def _dropped_stop(hook: Any) -> None:
+    """``sys.unraisablehook`` while a command runs. Python drops an exception raised while it
+    runs a finaliser (``__del__``, a weakref callback): a dropped :class:`Terminated` is
+    raised again 0.05 s later (SIGALRM), so the stop still reaches the command's handler."""
+    if not isinstance(hook.exc_value, Terminated):
+        sys.__unraisablehook__(hook)
+    elif threading.current_thread() is threading.main_thread():
+        signum = signal.Signals[hook.exc_value.signal_name]
+        signal.signal(signal.SIGALRM, lambda *_: _raise_terminated(signum, None))
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
 
 
 def _on_signal(signum: int, handler: Any) -> Any:
