@@ -7,7 +7,8 @@ and the hotspot's tunables in frozen groups) and results in :mod:`.options`."""
 
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
-from brainbulge.solver.ramp import NewtonSolver, solve
+from brainbulge.solver.ramp import NewtonSolver
+from brainbulge.solver.strategy import Rezoning, Route, Sequenced, Strategy, solve
 
-__all__ = ["Failure", "MixedForm", "NewtonSolver", "Solution", "SolverOptions", "StepRecord",
-           "solve"]
+__all__ = ["Failure", "MixedForm", "NewtonSolver", "Rezoning", "Route", "Sequenced", "Solution",
+           "SolverOptions", "StepRecord", "Strategy", "solve"]

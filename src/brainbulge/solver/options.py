@@ -369,6 +369,14 @@ class Solution:
     failure: Failure | None = None  # set when Newton diverged at the smallest load step
     note: str = ""  # why the ramp stopped otherwise (stop hooks, an equilibration)
     context: str = ""  # appended in parentheses (e.g. a rezoning that failed)
+    #: the route the solve took (:class:`~brainbulge.solver.strategy.Route`'s value)
+    route: str = "ramp"
+    #: mesh sequencing's coarse stage (:class:`~brainbulge.solver.remesh.sequencing.Sequenced`;
+    #: None without)
+    sequenced: Any = None
+    #: from a start state: True when Newton converged from it, False when the load was
+    #: ramped instead; None without a start state
+    started: bool | None = None
     #: every Newton solve of this solve, in order (:class:`~brainbulge.solver.newton.NewtonResult`)
     newton_results: list[Any] = field(default_factory=list)
 

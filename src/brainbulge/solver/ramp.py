@@ -28,7 +28,6 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
-from brainbulge.model.problem import Problem
 from brainbulge.solver import restart
 from brainbulge.solver.equations import MixedEquations
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
@@ -191,17 +190,6 @@ class NewtonSolver:
                         f"(|R| = {res.norm:.2e} after {res.iterations} iterations: "
                         f"{res.detail})")
         return finished(self.equations, sol, start)
-
-
-def solve(
-    problem: Problem,
-    element: str = "taylor-hood",
-    options: SolverOptions | None = None,
-    compile_energy: bool = False,
-) -> Solution:
-    """Build the mixed form of ``problem`` and ramp the swelling to its target."""
-    form = MixedForm(problem, element=element, compile_energy=compile_energy)
-    return NewtonSolver(form, options).solve()
 
 
 def check_feasible(eq: MixedEquations) -> None:

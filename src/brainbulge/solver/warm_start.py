@@ -1,0 +1,60 @@
+"""Newton from a given start state (another flap's solution on the same mesh), else the
+load ramp from ``Js = 1``.
+
+A start at full load converges in a few Newton iterations when it is close (a smaller flap
+at the same centre), or not at all; so Newton from it runs with a small budget
+(:class:`~brainbulge.solver.options.WarmStartOptions`: ``max_iterations`` Newton and
+``krylov_iterations`` GMRES iterations per linear solve), a failed Krylov solve is not
+retried, and the contacts' curvature term is in the tangent from the first iteration (the
+start is another equilibrium, not a state carried over from a coarser mesh). If that does not
+converge, the state is reset and the load ramped as without a start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Callable
+
+import numpy as np
+
+from brainbulge.solver.mixed import MixedForm
+from brainbulge.solver.options import Solution, SolverOptions
+
+log = logging.getLogger("brainbulge")
+
+
+def warm_start_options(options: SolverOptions) -> SolverOptions:
+    """``options`` for Newton from a start state (module docstring)."""
+    warm = options.warm_start
+    return dataclasses.replace(
+        options, max_iterations=warm.max_iterations, carried_curvature_tolerance=np.inf,
+        retry_linear=False,
+        krylov=dataclasses.replace(options.krylov, max_iterations=warm.krylov_iterations))
+
+
+def solve_from_start(form: MixedForm, options: SolverOptions,
+                     start: Callable[[MixedForm], bool]) -> Solution:
+    """``start(form)`` puts a start state into ``form`` and says whether it did; Newton from
+    there, else (or without a start) the load ramp. ``Solution.started``: True when Newton
+    converged from the start, False when it did not, None when there was none. The linear
+    solver's memory is released."""
+    from brainbulge.solver.ramp import NewtonSolver
+
+    started = None
+    if start(form):
+        # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
+        solver = NewtonSolver(form, warm_start_options(options))
+        sol = solver.equilibrate()
+        started = sol.converged
+        if not sol.converged:
+            log.info("  no convergence from the start state (%s): ramping the load",
+                     sol.message)
+            solver.release_linear_solver()
+            solver.state.reset()
+    if started is not True:
+        solver = NewtonSolver(form, options)
+        sol = solver.solve()
+    solver.release_linear_solver()
+    sol.started = started
+    return sol
