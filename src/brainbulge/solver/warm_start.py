@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from brainbulge.solver.driver import fallback
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Solution, SolverOptions
 
@@ -42,19 +43,28 @@ def solve_from_start(form: MixedForm, options: SolverOptions,
     from brainbulge.solver.ramp import NewtonSolver
 
     started = None
-    if start(form):
+
+    def from_start() -> Solution | None:
+        nonlocal started
+        if not start(form):
+            return None
         # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
         solver = NewtonSolver(form, warm_start_options(options))
         sol = solver.equilibrate()
         started = sol.converged
+        solver.release_linear_solver()
         if not sol.converged:
             log.info("  no convergence from the start state (%s): ramping the load",
                      sol.message)
-            solver.release_linear_solver()
             solver.state.reset()
-    if started is not True:
+        return sol
+
+    def ramp() -> Solution:
         solver = NewtonSolver(form, options)
         sol = solver.solve()
-    solver.release_linear_solver()
+        solver.release_linear_solver()
+        return sol
+
+    sol = fallback(from_start, ramp)
     sol.started = started
     return sol
