@@ -147,6 +147,9 @@ class ContrastPath:
     def settled(self, s: float, ds: float, sol: Solution) -> bool:
         return False
 
+    def transfer(self, s: float, sol: Solution, failed: bool) -> float | None:
+        return None  # one discretisation throughout
+
     def end(self, last: None, s: float, sol: Solution) -> Solution:
         """The last step's solution, with the Newton iterations of the whole path in one
         record at the form's load (the path's steps are not load steps) and its costs."""

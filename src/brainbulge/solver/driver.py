@@ -11,11 +11,13 @@ ContrastPath`). :func:`walk` owns the step control, the same for all (:class:`St
   until ``ds`` would fall below ``min_step``: then the path fails there;
 - a step that converged within ``fast_iterations`` Newton iterations lets the next one grow,
   ``ds <- grow ds``;
-- after every accepted step the path may write its checkpoint and may stop (its hooks).
+- after every accepted step the path may write its checkpoint and may stop (its hooks);
+- after an accepted or a failed step the path may change its discretisation (the transfer
+  of 2D rezoning): the walk goes on from its new state with the step it gives.
 
 What differs between paths is a small class (:class:`Continuation`): its start, one step's
-solve, what it records of an accepted or a failed step, and its end. :func:`fallback` tries
-one route and, when it does not converge, the next.
+solve, what it records of an accepted or a failed step, its transfer, and its end.
+:func:`fallback` tries one route and, when it does not converge, the next.
 """
 
 from __future__ import annotations
@@ -91,6 +93,12 @@ class Continuation(Protocol):
         """After an accepted step to ``s`` (next step ``ds``): checkpoint; True stops."""
         ...
 
+    def transfer(self, s: float, sol: Solution, failed: bool) -> float | None:
+        """At ``s``, after an accepted step or (``failed``) a failed one, the path may change
+        its discretisation (a rezoned mesh): then it returns the next step ``ds`` and the
+        walk goes on from its new state; None: nothing changed."""
+        ...
+
     def end(self, last: Any, s: float, sol: Solution) -> Solution:
         """The walk is over at ``s`` (``last``: the last accepted state): the result."""
         ...
@@ -113,6 +121,9 @@ def walk(path: Continuation) -> Solution:
             if not tried.converged:
                 sol.rejected_steps += 1
                 path.restore(last)
+                if (fresh := path.transfer(s, sol, failed=True)) is not None:
+                    ds, last = fresh, path.snapshot()
+                    continue
                 if path.rejected(s, ds, tried, sol):
                     break
                 step, ds = ds, ds * control.cut
@@ -127,6 +138,8 @@ def walk(path: Continuation) -> Solution:
                 ds *= control.grow
             if path.settled(s, ds, sol):
                 break
+            if (fresh := path.transfer(s, sol, failed=False)) is not None:
+                ds, last = fresh, path.snapshot()
         else:
             sol.converged = True
     finally:

@@ -124,6 +124,12 @@ class LoadRamp:
         self.predictor: Predictor | None = None
         self.bar: Any = None
 
+    def switch(self, solver: NewtonSolver) -> None:
+        """Go on with ``solver`` (another form: a rezoned mesh), without a predictor."""
+        self.solver = solver
+        self.form, self.state = solver.form, solver.state
+        self.predictor = None
+
     def begin(self) -> tuple[float, float, Solution]:
         """``(t, dt, sol)`` from ``start_load`` and ``steps``, or from the restart file
         (which also fills ``sol``'s steps and sets the predictor)."""
@@ -214,6 +220,9 @@ class LoadRamp:
             return True
         return False
 
+    def transfer(self, s: float, sol: Solution, failed: bool) -> float | None:
+        return None  # one discretisation throughout
+
     def end(self, last: Snapshot, t: float, sol: Solution) -> Solution:
         """The form at the last converged state and its load ``t``."""
         self.bar.close()
@@ -251,5 +260,10 @@ def finished(solver: MixedEquations, sol: Solution, start: float) -> Solution:
     swelling = [float(v) for v in form.problem.swelling.values()]
     sol.target_swelling = max(swelling, key=lambda js: abs(js - 1), default=1.0)
     sol.wall_time_s = time.perf_counter() - start
-    return Costs(solver.t_assembly, solver.t_solve,
-                 int(sum(solver.linear.stats.iterations))).into(sol)
+    return costs_of(solver).into(sol)
+
+
+def costs_of(eq: MixedEquations) -> Costs:
+    """What ``eq``'s solves cost so far: assembly and linear-solve times [s], Krylov
+    iterations."""
+    return Costs(eq.t_assembly, eq.t_solve, int(sum(eq.linear.stats.iterations)))
