@@ -175,7 +175,7 @@ def main() -> None:
     peaks.wrap(ns.linear, "setup", "AMG set-up", "linear system")
     peaks.wrap(ns.linear, "_krylov", "GMRES", "residual, line search")
     form.set_load(1.0 / case.steps)
-    ns.newton(form.gfu.vec, ns.opt.intermediate_tolerance)
+    ns.newton(form.gfu.vec, ns.opt.ramp.intermediate_tolerance)
     peaks.mark("end")
     print(f"{form.mesh.ne:,} tets, {len(ns.free):,} free DOFs\n")
     print(peaks.table())

@@ -22,7 +22,6 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any
 
 import ngsolve as ngs
 import numpy as np
@@ -59,7 +58,7 @@ class NewtonSolver:
         self.state = self.equations.state
         #: local solves at residual hotspots (MINI; option ``hotspot_relaxation``)
         self.relaxation = (HotspotRelaxation(self.equations, self.opt.hotspot)
-                           if self.opt.hotspot_relaxation and HotspotRelaxation.applies(form)
+                           if self.opt.newton.hotspot_relaxation and HotspotRelaxation.applies(form)
                            else None)
 
     def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
@@ -82,18 +81,20 @@ class NewtonSolver:
         sol = walk(LoadRamp(self))
         return finished(self.equations, sol, start)
 
-    def equilibrate(self) -> Solution:
+    def equilibrate(self, curvature_below: float | None = None) -> Solution:
         """Newton at the form's current load from its current state (one carried over
         from another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's
         solution), to the final tolerance, without load steps, the curvature term of the
-        contacts entering the tangent only below ``carried_curvature_tolerance``. On
-        failure the state is restored and ``converged`` is false."""
+        contacts entering the tangent only below ``curvature_below`` (default
+        ``newton.carried_curvature_tolerance``; ``inf``: always). On failure the state is
+        restored and ``converged`` is false."""
         form, state = self.form, self.state
         start = time.perf_counter()
         t = state.load
         sol = Solution(form=form, load=t, converged=False)
         before = state.snapshot()
-        res = self.newton(curvature_below=self.opt.carried_curvature_tolerance)
+        res = self.newton(curvature_below=(self.opt.newton.carried_curvature_tolerance
+                                           if curvature_below is None else curvature_below))
         sol.newton_results.append(res)
         if res.converged:
             pen = self.equations.max_penetration() if form.point_contacts else 0.0
@@ -108,6 +109,21 @@ class NewtonSolver:
         return finished(self.equations, sol, start)
 
 
+class LoadBar:
+    """The progress bar over the load (shown with ``options.progress``), in percent."""
+
+    def __init__(self, show: bool, t: float) -> None:
+        self.bar = tqdm(total=100, disable=not show, desc="load", unit="%", leave=False)
+        self.at(t)
+
+    def at(self, t: float) -> None:
+        """The load reached is ``t`` [-]."""
+        self.bar.update(round(100 * t) - self.bar.n)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
 class LoadRamp:
     """The load ramp as a path of :func:`~brainbulge.solver.driver.walk`: the parameter is
     the load factor ``t`` from ``start_load`` (or a restart file's load) to 1, each step
@@ -119,10 +135,12 @@ class LoadRamp:
     def __init__(self, solver: NewtonSolver) -> None:
         self.solver = solver
         self.form, self.opt, self.state = solver.form, solver.opt, solver.state
-        self.control = StepControl(cut=0.5, grow=1.5, fast_iterations=4,
-                                   min_step=self.opt.min_step)
+        ramp = self.opt.ramp
+        self.control = StepControl(cut=ramp.cut, grow=ramp.grow,
+                                   fast_iterations=ramp.fast_iterations,
+                                   min_step=ramp.min_step)
         self.predictor: Predictor | None = None
-        self.bar: Any = None
+        self.bar: LoadBar | None = None
 
     def switch(self, solver: NewtonSolver) -> None:
         """Go on with ``solver`` (another form: a rezoned mesh), without a predictor."""
@@ -135,16 +153,14 @@ class LoadRamp:
         (which also fills ``sol``'s steps and sets the predictor)."""
         opt = self.opt
         sol = self.sol = Solution(form=self.form, load=0.0, converged=False)
-        t, dt = opt.start_load, 1.0 / opt.steps
+        t, dt = opt.start_load, 1.0 / opt.ramp.steps
         if opt.checkpoint is not None:
             resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, self.form, sol)
             if resumed is not None:
                 t, dt, increment, last_dt = resumed
                 sol.resumed_from = t
                 self.predictor = (increment, last_dt)
-        self.bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%",
-                        leave=False)
-        self.bar.update(round(100 * t))
+        self.bar = LoadBar(opt.progress, t)
         return t, dt, sol
 
     def snapshot(self) -> Snapshot:
@@ -165,7 +181,8 @@ class LoadRamp:
             increment, last_dt = self.predictor
             state.x.data = last.x + (dt / last_dt) * increment
             form.set_load(t)  # exact prescribed values over the predictor
-        tol = opt.tolerance if t >= FULL else max(opt.tolerance, opt.intermediate_tolerance)
+        newton_tol = opt.newton.tolerance
+        tol = newton_tol if t >= FULL else max(newton_tol, opt.ramp.intermediate_tolerance)
         res = self.solver.newton(tol)
         sol_results.append(res)
         its = res.iterations
@@ -185,7 +202,7 @@ class LoadRamp:
         increment = state.x.CreateVector()
         increment.data = state.x - last.x
         self.predictor = (increment, dt)
-        self.bar.update(round(100 * t) - self.bar.n)
+        self.bar.at(t)
         sol.steps.append(StepRecord(t, tried.iterations, 0, tried.result.norm, pen))
         log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, tried.iterations,
                  tried.result.norm)

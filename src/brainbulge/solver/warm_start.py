@@ -26,11 +26,12 @@ log = logging.getLogger("brainbulge")
 
 
 def warm_start_options(options: SolverOptions) -> SolverOptions:
-    """``options`` for Newton from a start state (module docstring)."""
+    """``options`` for Newton from a start state (module docstring; the exact tangent is
+    :func:`solve_from_start`'s own)."""
     warm = options.warm_start
     return dataclasses.replace(
-        options, max_iterations=warm.max_iterations, carried_curvature_tolerance=np.inf,
-        retry_linear=False,
+        options, newton=dataclasses.replace(options.newton, max_iterations=warm.max_iterations),
+        linear=dataclasses.replace(options.linear, retry=False),
         krylov=dataclasses.replace(options.krylov, max_iterations=warm.krylov_iterations))
 
 
@@ -50,7 +51,7 @@ def solve_from_start(form: MixedForm, options: SolverOptions,
             return None
         # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
         solver = NewtonSolver(form, warm_start_options(options))
-        sol = solver.equilibrate()
+        sol = solver.equilibrate(curvature_below=np.inf)  # the exact tangent throughout
         started = sol.converged
         solver.release_linear_solver()
         if not sol.converged:

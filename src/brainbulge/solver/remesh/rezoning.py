@@ -134,7 +134,7 @@ class RezoningRamp:
         if self.gave_up or self.rezones >= opt.rezoning.max_rezones:
             return None
         if failed:
-            due = t > self.t_mesh + 1e-9  # a failure on a mesh that has deformed since
+            due = t > self.t_mesh  # a failure on a mesh that has deformed since
         else:
             due = t < FULL and float(deformed_quality(form.mesh, form.u).min()) < opt.rezoning.q_min
         if not due:
@@ -154,7 +154,7 @@ class RezoningRamp:
         self.costs.add(costs_of(self.ramp.solver.equations))
         self.ramp.switch(NewtonSolver(new, opt))  # a solver per mesh (its costs summed)
         self.t_mesh = t
-        return 1.0 / opt.steps
+        return 1.0 / opt.ramp.steps
 
     def _rezoned(self, form: MixedForm, t: float) -> tuple[MixedForm, int]:
         """The deformed domain meshed afresh, the state carried over and equilibrated at

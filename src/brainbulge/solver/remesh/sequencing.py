@@ -198,7 +198,7 @@ def solve_sequenced(
     t0 = time.perf_counter()
     if coarse_solution is None:
         coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False,
-                                         tolerance=max(options.tolerance,
+                                         tolerance=max(options.newton.tolerance,
                                                        options.sequencing.coarse_tolerance))
         coarse_solver = NewtonSolver(coarse, coarse_opt)
         csol = coarse_solver.solve()
