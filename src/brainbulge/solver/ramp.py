@@ -1,20 +1,23 @@
 """The load ramp: the swelling ``Js(t) = 1 + t (Js - 1)`` raised step by step to ``t = 1``.
 
-:class:`NewtonSolver` owns the loop and calls Newton (:meth:`Newton.newton
-<brainbulge.solver.newton.Newton.newton>`, one nonlinear solve at a given load) at each load.
-Each load step raises the load factor by ``dt``, predicts the new state by extrapolating the
-last increment,
+:class:`LoadRamp` is the path the continuation driver walks
+(:func:`~brainbulge.solver.driver.walk`, which owns the step control), each step one Newton
+solve (:func:`~brainbulge.solver.newton.newton`) at the new load. Each load step raises the
+load factor by ``dt``, predicts the new state by extrapolating the last increment,
 
     x_pred = x_prev + (dt / dt_last) (x_prev - x_before),
 
 and solves from it; if that fails, once more from the last converged state. A step that still
-fails is cut in half, ``dt <- dt / 2``, and retried from the last converged state; a step that
-converged within 4 iterations lets the next grow, ``dt <- 1.5 dt``. The ramp stops with a
-:class:`Failure` (the load, the step, the last Newton attempt's residual, iterations and
-reason, and where its force residual peaked) when the step would fall below ``min_step``, and
-early when a stop hook of :class:`SolverOptions` says so. Below full load Newton converges
-only to ``intermediate_tolerance``. After every accepted step the state can go to a restart
-file (:mod:`brainbulge.solver.restart`), from which a stopped run resumes.
+fails is cut, ``dt <- cut dt``, and retried from the last converged state; a step that
+converged within ``fast_iterations`` lets the next grow, ``dt <- grow dt`` (``options.ramp``:
+0.5, 4 and 1.5). The ramp stops with a :class:`Failure` (the load, the step, the last Newton
+attempt's residual, iterations and reason, and where its force residual peaked) when the
+step would fall below ``min_step``, and early when a stop hook of :class:`SolverOptions` says
+so. Below full load Newton converges only to ``intermediate_tolerance``. After every accepted
+step the state can go to a restart file (:mod:`brainbulge.solver.restart`), from which a
+stopped run resumes. :class:`NewtonSolver` holds a form's equations and offers the ramp
+(:meth:`NewtonSolver.solve`), Newton at one load (:meth:`NewtonSolver.equilibrate`) and one
+Newton solve.
 """
 
 from __future__ import annotations

@@ -1,20 +1,21 @@
 """Load stepping with rezoning (2D): the mesh is exchanged when its image degenerates.
 
-:class:`NewtonSolver` ramps the load on one mesh. Here the ramp stops after an accepted load
-step when the deformed triangles' smallest shape quality ``q = 4 sqrt(3) A / sum l^2`` falls
-below ``q_min`` (or when a step fails on a mesh that has deformed since the last rezoning),
-the deformed domain is meshed afresh and pulled back to the reference configuration
-(:func:`brainbulge.geometry.rezone.rezone`), the state ``(u, p, lambda)`` is carried over,
-and the ramp goes on from the same load. The material is hyperelastic, so the converged
-state at a load does not depend on the mesh history: rezoning changes the discretisation,
-not the problem. The carried-over state is first equilibrated at the same load (in at most
-``equilibration_iterations`` Newton iterations); if that (or the
+The load ramp (:class:`~brainbulge.solver.ramp.LoadRamp`) walks the load on one mesh;
+:class:`RezoningRamp` holds it and adds the continuation's transfer between steps: after an
+accepted load step below full load whose deformed triangles' smallest shape quality ``q = 4
+sqrt(3) A / sum l^2`` has fallen below ``q_min`` (or after a step that failed on a mesh that
+has deformed since it was made), the deformed domain is meshed afresh and pulled back to the
+reference configuration (:func:`brainbulge.geometry.rezone.rezone`), the state ``(u, p,
+lambda)`` is carried over, and the ramp goes on from the same load. The material is
+hyperelastic, so the converged state at a load does not depend on the mesh history: rezoning
+changes the discretisation, not the problem. The carried-over state is first equilibrated at
+the same load (in at most ``equilibration_iterations`` Newton iterations); if that (or the
 remeshing) fails, the old mesh keeps its converged state and the ramp goes on there without
 rezoning. That old mesh may itself be a rezoned one, so a run can end earlier than the plain
 ramp on the first mesh would: sliding alpha 80 / beta 30 reaches load 0.62 with rezoning and
-0.77 without it (docs/known-limits.md). ``q_min``, ``equilibration_iterations`` and
-``max_rezones`` are ``SolverOptions.rezoning``
-(:class:`~brainbulge.solver.options.RezoningOptions`).
+0.77 without it (docs/known-limits.md); after ``max_rezones`` rezonings it goes on without
+them too. ``q_min``, ``equilibration_iterations`` and ``max_rezones`` are
+``SolverOptions.rezoning`` (:class:`~brainbulge.solver.options.RezoningOptions`).
 """
 
 from __future__ import annotations
