@@ -26,7 +26,8 @@ from brainbulge.results.records.output_folder import claim_output_dir, read_mani
 
 FAST = ["hemidisk", "--mesh-size", "0.3", "--steps", "1"]
 SUMMARY = {"max_displacement": 0.1, "min_radial_stretch": 0.9, "max_radial_stretch": 1.1,
-           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0}
+           "min_tangential_stretch": 0.9, "max_tangential_stretch": 1.2, "max_penetration": 0.0,
+           "max_skull_crossing": 0.0}
 BRAIN = {"swelling_reached": 1.1, "max_displacement": 1.0, "midline_shift_mm": 0.1,
          "bulge_volume_ml": 10.0, "max_principal_strain": 0.1, "max_penetration_mm": 0.0}
 
