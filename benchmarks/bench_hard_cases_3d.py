@@ -281,19 +281,22 @@ def without_contrast_path() -> None:
             stalled[id(form)] = (sol, State(form).snapshot())
         return sol, first
 
-    class NoFallback(seq.NewtonSolver):
-        def solve(self):
-            if id(self.form) not in stalled:
-                return super().solve()
-            sol, snap = stalled.pop(id(self.form))
-            self.state.restore(snap)
-            self.form.set_load(sol.load)
-            for pc in self.form.point_contacts:
-                pc.update(self.form.gfu.vec.FV().NumPy())
-            return sol
+    ramp = seq.ramp_from_rest
+
+    def no_fallback(form, options):
+        """The fine stage's fall-back ramp (the fallback combinator's second route), or
+        the stalled state and record of a fine stage that failed."""
+        if id(form) not in stalled:
+            return ramp(form, options)
+        sol, snap = stalled.pop(id(form))
+        State(form).restore(snap)
+        form.set_load(sol.load)
+        for pc in form.point_contacts:
+            pc.update(form.gfu.vec.FV().NumPy())
+        return sol
 
     seq.equilibrate_through_contrast = fine_stage
-    seq.NewtonSolver = NoFallback
+    seq.ramp_from_rest = no_fallback
 
 
 if __name__ == "__main__" and sys.argv[1:2] == ["--no-contrast"]:

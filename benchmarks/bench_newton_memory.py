@@ -169,7 +169,7 @@ def main() -> None:
     peaks.wrap(eq.linear, "setup", "AMG set-up", "linear system")
     peaks.wrap(eq.linear, "_krylov", "GMRES", "residual, line search")
     form.set_load(1.0 / case.steps)
-    result = ns.newton(ns.opt.intermediate_tolerance)
+    result = ns.newton(ns.opt.ramp.intermediate_tolerance)
     peaks.mark("end")
     print(f"{form.mesh.ne:,} tets, {len(eq.free):,} free DOFs\n")
     print(peaks.table())

@@ -78,7 +78,7 @@ def test_the_path_ends_at_the_models_equilibrium() -> None:
     assert len(contrast_path(fine.problem.materials, PATH)) == 3
     assert [s.load for s in sol.steps] == [1.0]
     assert sol.newton_iterations >= 3
-    assert record.initial_residual > options.tolerance
+    assert record.initial_residual > options.newton.tolerance
     x, x_ref = fine.u.vec.FV().NumPy(), reference.u.vec.FV().NumPy()
     assert np.abs(x - x_ref).max() < 1e-4 * np.abs(x_ref).max()
     lam, lam_ref = fine.point_contacts[0].lam, reference.point_contacts[0].lam

@@ -13,20 +13,20 @@ from inclusion_cases import _inclusion_problem
 def test_forcing_terms_follow_the_residual_ratio() -> None:
     """Eisenstat-Walker choice 2: tight when Newton converges fast, capped, safeguarded,
     and never tighter than the Newton tolerance needs."""
-    from brainbulge.solver.inexact import ETA_MIN, forcing_term
+    from brainbulge.solver.inexact import forcing_term
 
-    cap = SolverOptions().eta_max
+    cap, floor = SolverOptions().linear.eta_max, SolverOptions().linear.eta_min
 
     def eta(eta: float, ratio: float, norm: float, tol: float) -> float:
-        return forcing_term(eta, ratio, norm, tol, cap)
+        return forcing_term(eta, ratio, norm, tol, cap, floor)
 
     assert eta(cap, 0.9, 1.0, 1e-9) == cap  # slow progress: loose
     assert eta(cap, 1e-3, 1e-3, 1e-12) == pytest.approx(0.9e-6)
     # the cap wins over the floor 0.1 tol / |R| (GMRES's norm is not Newton's)
     assert eta(cap, 1e-3, 1e-8, 1e-9) == pytest.approx(min(1e-2, cap))
     assert eta(0.5, 1e-6, 1.0, 1e-20) == pytest.approx(min(0.9 * 0.25, cap))
-    assert eta(cap, 0.0, 1e-30, 0.0) == ETA_MIN
-    assert forcing_term(0.5, 0.9, 1.0, 1e-9, 0.5) == 0.5  # another cap
+    assert eta(cap, 0.0, 1e-30, 0.0) == floor
+    assert forcing_term(0.5, 0.9, 1.0, 1e-9, 0.5, floor) == 0.5  # another cap
 
 
 

@@ -49,7 +49,7 @@ def test_a_diverged_ramp_says_where_the_force_was_unbalanced() -> None:
     assert failure is not None and failure.kept == 0.0
     assert failure.step == pytest.approx(0.5) and failure.load == pytest.approx(0.5)
     assert sol.failure_site is failure.site and np.all(np.isfinite(failure.site))
-    assert failure.iterations == 1 and failure.residual > OPTIONS.tolerance
+    assert failure.iterations == 1 and failure.residual > OPTIONS.newton.tolerance
     assert failure.reason == "max_iterations = 1 reached"
     assert (f"(the last attempt: |R| = {failure.residual:.2e} after 1 Newton iteration, "
             "max_iterations = 1 reached)") in sol.message

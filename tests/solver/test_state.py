@@ -71,7 +71,7 @@ def test_newton_returns_its_result_and_the_step_limit_scales_every_update() -> N
         res = newton(solver.equations, solver.opt, limit_step=limit, observers=[watch])
         assert res.converged and res.reason is Reason.CONVERGED and res.site is None
         assert list(res.residuals) == watch.norms and len(res.residuals) == res.iterations + 1
-        assert res.norm <= solver.opt.tolerance
+        assert res.norm <= solver.opt.newton.tolerance
         results[name], states[name] = res, form.gfu.vec.FV().NumPy().copy()
         if limit is not None:
             assert all(s == 1.0 for s in watch.steps)  # the halved update is accepted whole

@@ -38,10 +38,10 @@ class MixedEquations:
         options = options or SolverOptions()
         self.form = form
         self.state = State(form)  # x, lambda, t: what a solve changes
-        self.linear: LinearSolver = make_linear_solver(options.linear_solver, form,
+        self.linear: LinearSolver = make_linear_solver(options.linear.solver, form,
                                                        options.krylov)
         self.closed = None  # the closed-form residual and tangent, where they apply
-        if form.element == "mini" and options.closed_form:
+        if form.element == "mini" and options.newton.closed_form:
             # (Numba, ~0.5 s: imported only where it may apply)
             from brainbulge.solver.fast import mini_plane, mini_tangent
 
@@ -69,7 +69,7 @@ class MixedEquations:
         self.t_solve = 0.0
         self.contact = ActiveSet(form, self.free, fes.ndof)
         # inexact Newton (Eisenstat-Walker): an iterative linear solve to a relative tolerance
-        self.inexact = options.linear_solver == "krylov"
+        self.inexact = options.linear.solver == "krylov"
         self._vertex_dofs: tuple[np.ndarray, np.ndarray] | None = None
         self._new_plans()
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.solver.equations import MixedEquations
-from brainbulge.solver.inexact import ETA_MIN, forcing_term
+from brainbulge.solver.inexact import forcing_term
 from brainbulge.solver.options import SolverOptions
 from brainbulge.solver.state import Snapshot, State
 from brainbulge.solver.threads import serial_openblas
@@ -133,20 +133,21 @@ def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None =
            observers: Sequence[NewtonObserver] | None = None,
            relax: Callable[[ngs.BaseVector, float], float] | None = None) -> NewtonResult:
     """Solve ``R(x) = 0`` at the form's load from its current state (changed in place, with
-    the contact pressures) to ``tolerance`` (default: ``options.tolerance``).
+    the contact pressures) to ``tolerance`` (default: ``options.newton.tolerance``).
 
     ``curvature_below``: the contacts' curvature term enters the tangent only at iterates
     whose scaled residual is at most this (a modified Newton method far from the solution).
     ``limit_step``: a factor in (0, 1] applied to each Newton update before the line search.
     ``observers``: default a :class:`NewtonLog`. ``relax(x, |R|) -> |R|``: a local solve
     after each accepted step (:mod:`brainbulge.solver.fast.hotspot`)."""
-    tol = options.tolerance if tolerance is None else tolerance
-    watch = [NewtonLog(options.slow_newton_s)] if observers is None else observers
+    tol = options.newton.tolerance if tolerance is None else tolerance
+    watch = [NewtonLog(options.newton.slow_newton_s)] if observers is None else observers
     linear_before = sum(eq.linear.stats.iterations)
     # one OpenBLAS thread beside PARDISO (brainbulge.solver.threads); the Krylov path's
     # long vectors keep theirs (111k-tet brain: 10 % slower on one)
     with nullcontext() if eq.inexact else serial_openblas():
-        run = _Inexact(options.eta_max if eq.inexact else None, options.eta_max)
+        eta_max = options.linear.eta_max
+        run = _Inexact(eta_max if eq.inexact else None, eta_max)
         ok, its, reason, detail = _iterate(eq, options, tol, curvature_below, limit_step,
                                            watch, relax, run)
     return NewtonResult(ok, its, tuple(run.residuals),
@@ -159,12 +160,12 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
              relax: Callable[[ngs.BaseVector, float], float] | None, run: _Inexact
              ) -> tuple[bool, int, Reason, str]:
     """:func:`newton`'s loop: (converged, iterations, reason, detail)."""
-    state = eq.state
+    state, nw = eq.state, opt.newton
     eq.contact.start_solve()
     eq.linear.new_load_step()
     norm = eq.scaled_norm(eq.residual(state.x))
     short_steps, norm_before_short = 0, norm  # the run of short line-search steps
-    for it in range(opt.max_iterations + 1):
+    for it in range(nw.max_iterations + 1):
         run.residuals.append(norm)
         for o in watch:
             o.iteration(it, norm)
@@ -172,7 +173,7 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
             return True, it, Reason.CONVERGED, ""
         if not np.isfinite(norm):
             return False, it, Reason.NOT_FINITE, "the residual is not finite"
-        if it == opt.max_iterations:
+        if it == nw.max_iterations:
             return False, it, Reason.MAX_ITERATIONS, f"max_iterations = {it} reached"
         first, progress = run.residuals[0], opt.required_progress
         if progress is not None and it == progress[0] and norm > progress[1] * first:
@@ -193,8 +194,9 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
         # Newton residuals to four digits; tightening after such steps only doubled the
         # GMRES iterations)
         if run.eta is not None:
-            run.eta = min(run.cap, forcing_term(run.eta, trial / norm, trial, tol, opt.eta_max))
-        if s > 1 / 64:
+            run.eta = min(run.cap, forcing_term(run.eta, trial / norm, trial, tol,
+                                                opt.linear.eta_max, opt.linear.eta_min))
+        if s > nw.short_step:
             short_steps, norm_before_short = 0, trial
         else:
             short_steps += 1
@@ -202,11 +204,13 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
         if relax is not None and norm > tol:
             norm = relax(state.x, norm)
         eq.contact.let_pulling_go()
-        if 0 < opt.stagnation <= short_steps and norm > tol and norm > 0.95 * norm_before_short:
+        if (0 < nw.stagnation <= short_steps and norm > tol
+                and norm > nw.stagnation_progress * norm_before_short):
             log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
                       norm_before_short)
-            return False, it + 1, Reason.STAGNATED, (f"stagnated: {short_steps} line-search "
-                                                     "steps of at most 1/64 in a row")
+            return False, it + 1, Reason.STAGNATED, (
+                f"stagnated: {short_steps} line-search steps of at most "
+                f"{_fraction(nw.short_step)} in a row")
     raise AssertionError("unreachable: the loop returns at its last iteration")
 
 
@@ -222,7 +226,8 @@ def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol
     K = eq.tangent(state.x, curvature)  # shared by the retries of this iteration
     run.guess = None  # the last linear solution, the guess of a retry
     tightened = False
-    for attempt in range(4):
+    redirections = opt.newton.redirections
+    for attempt in range(redirections + 1):
         dx, dlams = _direction(eq, opt, K, run)
         if limit_step is not None:
             f = limit_step(state.x, dx)
@@ -230,7 +235,8 @@ def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol
                 dx.data = f * dx
                 dlams = [f * d for d in dlams]
         s, trial, tightened = _line_search(eq, state, x0, dx, dlams, norm, tol,
-                                           retry=attempt < 3, tightened=tightened, run=run)
+                                           retry=attempt < redirections, tightened=tightened,
+                                           run=run, opt=opt)
         if s is None or s > 0:
             return s, trial
         state.restore(x0)  # retry the direction at x0
@@ -247,17 +253,19 @@ def _direction(eq: MixedEquations, opt: SolverOptions, K, run: _Inexact
     try:
         dx, dlams, run.guess = eq.newton_direction(x, K, run.guess, run.eta)
     except ConvergenceError:
-        if run.eta is None or run.eta <= ETA_MIN or not opt.retry_linear:
+        eta_min = opt.linear.eta_min
+        if run.eta is None or run.eta <= eta_min or not opt.linear.retry:
             raise
         log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
-        run.eta = ETA_MIN
+        run.eta = eta_min
         dx, dlams, run.guess = eq.newton_direction(x, K, None, run.eta)
     return dx, dlams
 
 
 def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVector,
                  dlams: list[np.ndarray], norm: float, tol: float, retry: bool,
-                 tightened: bool, run: _Inexact) -> tuple[float | None, float, bool]:
+                 tightened: bool, run: _Inexact, opt: SolverOptions
+                 ) -> tuple[float | None, float, bool]:
     """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
     ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
 
@@ -267,28 +275,34 @@ def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVec
     is solved 100x tighter (once per iteration: ``tightened``); ``s = None`` when no step
     of at least 1/1024 lowers the residual (the state back at ``x0``).
     """
-    x = state.x
+    x, nw, lin = state.x, opt.newton, opt.linear
     s = 1.0
     while True:
         x.data = x0.x - s * dx
         state.set_multipliers([l0 - s * dl for l0, dl in zip(x0.lam, dlams, strict=True)])
         trial = eq.scaled_norm(eq.residual(x))
-        if trial < (1 - 1e-4 * s) * norm or trial <= tol:
+        if trial < (1 - nw.armijo * s) * norm or trial <= tol:
             return s, trial, tightened
         if s == 1.0 and retry and eq.contact.force_penetrating():
             return 0.0, trial, tightened
-        s *= 0.5
-        if (s < 1 / 1024 and run.eta is not None and not tightened and run.eta > ETA_MIN
-                and retry):
+        s *= nw.backtrack
+        if (s < nw.min_line_step and run.eta is not None and not tightened
+                and run.eta > lin.eta_min and retry):
             # no step at all from a loose Krylov direction: before giving up (and
             # cutting the load step) solve the direction 100x tighter. (Retrying at
             # every short step instead cost a 1.54M-tet run an 812 s solve for the same
             # 1/16 step: there the nonlinearity, not the direction, made the step short.)
             run.tightened += 1
-            run.eta = run.cap = max(ETA_MIN, 1e-2 * run.eta)
+            run.eta = run.cap = max(lin.eta_min, lin.tighten * run.eta)
             log.debug("    line search failed at Krylov rtol %.1e: retrying tighter",
-                      1e2 * run.eta)
+                      run.eta / lin.tighten)
             return 0.0, trial, True
-        if s < 1 / 1024:
+        if s < nw.min_line_step:
             state.restore(x0)
             return None, trial, tightened
+
+
+def _fraction(x: float) -> str:
+    """``x`` as ``1/n`` when it is one (a power-of-two step), else as a number."""
+    n = round(1 / x) if x > 0 else 0
+    return f"1/{n}" if n and 1 / n == x else f"{x:g}"

@@ -1,9 +1,8 @@
 """What a solve is asked to do (:class:`SolverOptions`) and what it returns (:class:`Solution`).
 
-The continuations', the Krylov solver's and the hotspot relaxation's tunables are frozen
-groups of :class:`SolverOptions` (``options.contrast``, ``options.sequencing``,
-``options.rezoning``, ``options.warm_start``, ``options.krylov``, ``options.hotspot``), each
-field declared
+Every tunable of a solve is a field of a frozen group of :class:`SolverOptions` (the
+options tree, :mod:`brainbulge.solver.option_groups`: ``ramp``, ``newton``, ``linear``,
+``krylov``, ``hotspot``, ``contrast``, ``sequencing``, ``rezoning``, ``warm_start``), declared
 once with :func:`~brainbulge.model.options.option`: default, unit, range and the reason for
 the default; a group checks its ranges when built.
 
@@ -14,17 +13,33 @@ the ramp stopped short of ``t = 1``, a structured :class:`Failure`.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from brainbulge.errors import ConvergenceError, InputError
-from brainbulge.model.options import check_ranges, option
-from brainbulge.solver.inexact import ETA_MIN
+from brainbulge.solver.option_groups import (
+    LINEAR_SOLVERS,
+    RATIO,
+    ContrastOptions,
+    HotspotOptions,
+    KrylovOptions,
+    LinearOptions,
+    NewtonOptions,
+    OptionGroup,
+    RampOptions,
+    RezoningOptions,
+    SequencingOptions,
+    WarmStartOptions,
+)
+
+__all__ = ["DIVERGENCE_ADVICE", "LINEAR_SOLVERS", "RATIO", "SHORTHAND", "ContrastOptions",
+           "Costs", "Failure", "HotspotOptions", "KrylovOptions", "LinearOptions",
+           "NewtonOptions", "OptionGroup", "RampOptions", "RezoningOptions",
+           "SequencingOptions", "Solution", "SolverOptions", "StepRecord", "WarmStartOptions"]
 
 if TYPE_CHECKING:
     from brainbulge.solver.mixed import MixedForm
@@ -34,149 +49,54 @@ if TYPE_CHECKING:
 #: :meth:`Solution.describe`)
 DIVERGENCE_ADVICE = "Try more --steps, a finer mesh, or check the boundary conditions"
 
-LINEAR_SOLVERS = ("pardiso", "krylov")
-
-#: the unit of a dimensionless field
-RATIO = " [-]"
-
-
-class OptionGroup:
-    """A frozen group of options, its fields declared with
-    :func:`~brainbulge.model.options.option`: built only with every value in its range."""
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
-
-@dataclass(frozen=True)
-class ContrastOptions(OptionGroup):
-    """The stiffness-contrast path of a fine stage (:mod:`brainbulge.solver.contrast`)."""
-
-    start: float = option(
-        2.0, "the contrast mu_max / mu_min the path starts from (at most the model's): white "
-        "over gray matter (666 / 333 kPa), the parenchyma's own, where the 100k-tet "
-        "template's fine stage converges from the 25k-tet state (4 Newton iterations with a "
-        "2 or 8 mm edge); the upper bound: the model's contrast alone, no path",
-        unit=RATIO, range=(1.0, 1e6))
-    factor: float = option(
-        math.sqrt(10.0), "growth of the contrast per step (2 -> 6.3 -> 20 for the brain's "
-        "CSF)", unit=RATIO, range=(1.01, 1e3))
-    progress_iterations: int = option(
-        3, "each step's Newton solve gives up when its scaled residual is not below "
-        "progress_factor times its first after this many iterations (the converged steps "
-        "logged on the 100k- and 1.40M-tet templates fell 40-18,000x in 3)",
-        unit=" iterations", range=(1, 100))
-    progress_factor: float = option(
-        0.1, "the fall of the scaled residual each step requires within progress_iterations "
-        "(the converged steps fell to 2e-3-3e-2 of their first)", unit=RATIO,
-        range=(0.0, 1.0))
+#: the keywords ``SolverOptions(...)`` also takes for a field of a group, by the names these
+#: fields had before the groups (``SolverOptions(steps=2)`` is ``SolverOptions(ramp=
+#: RampOptions(steps=2))``): name -> (group, field)
+SHORTHAND = {
+    "steps": ("ramp", "steps"),
+    "min_step": ("ramp", "min_step"),
+    "intermediate_tolerance": ("ramp", "intermediate_tolerance"),
+    "max_iterations": ("newton", "max_iterations"),
+    "tolerance": ("newton", "tolerance"),
+    "carried_curvature_tolerance": ("newton", "carried_curvature_tolerance"),
+    "stagnation": ("newton", "stagnation"),
+    "slow_newton_s": ("newton", "slow_newton_s"),
+    "closed_form": ("newton", "closed_form"),
+    "hotspot_relaxation": ("newton", "hotspot_relaxation"),
+    "linear_solver": ("linear", "solver"),
+    "eta_max": ("linear", "eta_max"),
+    "retry_linear": ("linear", "retry"),
+}
 
 
-@dataclass(frozen=True)
-class SequencingOptions(OptionGroup):
-    """Mesh sequencing, coarse mesh to fine (:mod:`brainbulge.solver.remesh.sequencing`)."""
-
-    coarse_tolerance: float = option(
-        1e-4, "the coarse stage's Newton tolerance on the scaled residual (never tighter "
-        "than the solve's): its state is only where the fine mesh starts, whose carried-over "
-        "residual is ~1e-2 (1.7e-2 at 1.40M from 111k tets, the same to four digits from a "
-        "coarse state at 1e-7); the 111k coarse ramp takes 6 Newton iterations instead of 9",
-        unit=RATIO, range=(1e-14, 1e-1))
-    fold_ratio: float = option(
-        0.2, "a contact point moved onto the obstacle goes back if an element of it is left "
-        "with less than this fraction of its reference measure (and less than before the "
-        "move): 18 folded tets at 1.40M under the skull's 2 mm rounded cut edge without it",
-        unit=RATIO, range=(0.0, 1.0))
-
-
-@dataclass(frozen=True)
-class RezoningOptions(OptionGroup):
-    """2D rezoning during the load ramp (:mod:`brainbulge.solver.remesh.rezoning`)."""
-
-    q_min: float = option(
-        0.2, "rezone when the smallest deformed triangle quality 4 sqrt(3) A / sum l^2 falls "
-        "below this (above 1: after every accepted step)", unit=RATIO, range=(0.0, 2.0))
-    equilibration_iterations: int = option(
-        8, "Newton iterations allowed to equilibrate a carried-over state on the new mesh "
-        "before the rezoning counts as failed: in the sector study each rezoning that "
-        "succeeded converged in 4, each that failed stood at 3e-4-1e-2 after 14-20",
-        unit=" iterations", range=(1, 1000))
-    max_rezones: int = option(
-        50, "mesh exchanges in one solve before the ramp goes on without rezoning",
-        unit=" rezonings", range=(0, 10_000))
-
-
-@dataclass(frozen=True)
-class WarmStartOptions(OptionGroup):
-    """Newton from a given start state (another flap's solution) before the load is ramped
-    instead (:func:`brainbulge.studies.craniectomy.solve_brain`'s ``start``)."""
-
-    max_iterations: int = option(
-        8, "Newton iterations from the start state: about what a cold ramp of a large flap "
-        "takes (21k tets, 120 mm: 8, the same from the 100 mm flap's state, with the exact "
-        "tangent), so a start that does not help costs at most a ramp",
-        unit=" iterations", range=(1, 1000))
-    krylov_iterations: int = option(
-        200, "GMRES iterations of one linear solve from the start state: a larger flap's "
-        "start frees the tissue under the newly opened ring at full pressure; on the "
-        "111k-tet template (80 -> 100 mm) GMRES stood at 6e-3 after 1,000 iterations, twice, "
-        "150 s before the ramp; converging solves there take <= ~170",
-        unit=" iterations", range=(1, 100_000))
-
-
-@dataclass(frozen=True)
-class HotspotOptions(OptionGroup):
-    """The hotspot relaxation between Newton iterations
-    (:mod:`brainbulge.solver.fast.hotspot`; on or off: ``hotspot_relaxation``)."""
-
-    share: float = option(
-        0.5, "the hotspot: the fewest vertices holding this share of the scaled |R|^2 (at "
-        "1.40M tets 90-100 % sat at three CSF vertices of the flap rim)", unit=RATIO,
-        range=(0.01, 1.0))
-    max_vertices: int = option(
-        16, "a hotspot of more vertices is left to Newton (a residual spread over the body "
-        "is Newton's job); no other value measured", unit=" vertices", range=(1, 100_000))
-    rings: int = option(
-        2, "rings of neighbours solved with the hotspot (with them 4 fine iterations instead "
-        "of 7 at 1.40M tets; no other value measured)", unit=" rings", range=(0, 10))
-    max_iterations: int = option(
-        30, "Newton iterations of one local solve (a cap: the result is kept only when the "
-        "global residual falls); no other value measured", unit=" iterations",
-        range=(1, 1000))
-
-
-@dataclass(frozen=True)
-class KrylovOptions(OptionGroup):
-    """GMRES with AMG blocks (:class:`~brainbulge.solver.linear.krylov.BlockKrylovSolver`)."""
-
-    max_iterations: int = option(
-        1000, "GMRES iterations per linear solve, all restarts included (converging solves on "
-        "the 111k-tet template take <= ~170)", unit=" iterations", range=(1, 1_000_000))
-    restart: int = option(
-        200, "GMRES restart length (basis vectors kept: 1.7 GB at 1.08M unknowns); with 100 "
-        "the 1.40M-tet brain's fine-stage tangent stalled at 5.6e-2 after 200 iterations, it "
-        "converges in 157 without a restart", unit=" vectors", range=(1, 100_000))
-    refresh_factor: float = option(
-        1.5, "rebuild the AMG hierarchies when a solve takes more than this times the "
-        "iterations of the first solve after the last set-up; no other value measured",
-        unit=RATIO, range=(1.0, 1e3))
-
-
-@dataclass
+@dataclass(init=False)
 class SolverOptions:
-    """Everything a caller may tune in a solve: the load ramp's, Newton's and the linear
-    solver's controls, each with its default and why (:mod:`brainbulge.solver.ramp`,
-    :mod:`brainbulge.solver.newton`). A solver takes them at construction; for other
-    values build another one (``dataclasses.replace(options, ...)``)."""
+    """What a solve is asked to do: the options tree's groups
+    (:mod:`brainbulge.solver.option_groups`: every tunable, declared once), and what is not a
+    tunable: where the ramp starts, a continuation's requirement on each Newton solve, the
+    stop hooks, the restart file and the progress bar. A solver takes them at construction;
+    for other values build another one (``dataclasses.replace(options, ...)``; a group:
+    ``dataclasses.replace(options.newton, ...)``). The keywords of :data:`SHORTHAND` set a
+    group's field by its old flat name."""
 
-    # --- the load ramp -------------------------------------------------------------------
-    #: initial number of equal load steps from ``Js = 1`` to the target
-    steps: int = 5
-    #: smallest load increment ``dt`` [-] before the ramp gives up with a :class:`Failure`
-    min_step: float = 1e-3
-    #: load factor [-] of the form's current state, where the ramp starts (a state carried
-    #: over from another mesh by rezoning)
+    # --- the options tree (frozen groups) ------------------------------------------------
+    ramp: RampOptions = field(default_factory=RampOptions)
+    newton: NewtonOptions = field(default_factory=NewtonOptions)
+    linear: LinearOptions = field(default_factory=LinearOptions)
+    krylov: KrylovOptions = field(default_factory=KrylovOptions)
+    hotspot: HotspotOptions = field(default_factory=HotspotOptions)
+    contrast: ContrastOptions = field(default_factory=ContrastOptions)
+    sequencing: SequencingOptions = field(default_factory=SequencingOptions)
+    rezoning: RezoningOptions = field(default_factory=RezoningOptions)
+    warm_start: WarmStartOptions = field(default_factory=WarmStartOptions)
+
+    # --- not tunables: set by the code paths and the caller's I/O ------------------------
+    #: load factor [-] of the form's current state, where the ramp starts
     start_load: float = 0.0
+    #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
+    #: after ``k`` iterations gives up (set by the contrast path from ``contrast``; None: no
+    #: such requirement)
+    required_progress: tuple[int, float] | None = None
     #: asked after each accepted load step below full load; ``True`` stops the ramp there
     #: (the state is kept, ``converged`` is false, ``stopped_early`` true)
     stop_when: Callable[[], bool] | None = None
@@ -192,84 +112,26 @@ class SolverOptions:
     #: show a progress bar over the load
     progress: bool = False
 
-    # --- Newton --------------------------------------------------------------------------
-    #: Newton iterations per attempt at one load
-    max_iterations: int = 20
-    #: on the scaled residual at full load [-] (force / (mu L^(d-1)), volume / |Omega|;
-    #: :meth:`~brainbulge.solver.equations.MixedEquations.scaled_norm`)
-    tolerance: float = 1e-9
-    #: Newton's tolerance below full load [-] (never tighter than ``tolerance``). The
-    #: material is hyperelastic, so an intermediate state is only the start of the next
-    #: step (its extrapolation starts ~1e-3 away): converging it further buys nothing.
-    #: Saves about one Newton iteration per intermediate load step (2D headline: 20 -> 18).
-    intermediate_tolerance: float = 1e-6
-    #: Newton from a carried-over state (``NewtonSolver.equilibrate``: mesh sequencing,
-    #: another flap's solution) leaves the point contacts' curvature term out of the tangent
-    #: until the scaled residual is at most this [-] (a modified Newton method far from the
-    #: solution, the exact tangent for the end game; ``inf``: always in). At a state carried
-    #: over from a coarse mesh the flap rim's contact points press with up to ~350 kPa on the
-    #: skull's convex rounded cut edge, where the term ``-A lambda grad^2 g`` makes sliding
-    #: along the edge nearly free: the exact Newton direction slid points by 5-8 mm and
-    #: folded elements (line-search steps of 1/8; 1.54M tets, 10 Newton iterations); without
-    #: the term the first step is a full one (1.7e-2 -> 8.7e-4) and the stage takes 6.
-    carried_curvature_tolerance: float = 1e-3
-    #: an attempt stops early, as failed, after this many Newton iterations in a row whose
-    #: line search accepted at most 1/64 of the step and that together lowered the residual
-    #: by less than 5 % (0: never). Where the load path folds, the 2D alpha 80 / beta 30
-    #: runs spent all 20 iterations on 0.1-0.4 % steps, attempt after attempt.
-    stagnation: int = 4
-    #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
-    #: after ``k`` iterations gives up (None: no such requirement)
-    required_progress: tuple[int, float] | None = None
-    #: a Newton solve running longer than this [s] logs each iteration at INFO (else DEBUG),
-    #: so that a long fine-mesh solve shows its progress in the log
-    slow_newton_s: float = 30.0
-    #: the closed-form MINI residual and tangent where they apply
-    #: (:mod:`brainbulge.solver.fast.mini_tangent`, ``mini_plane``; False: NGSolve's, the
-    #: same to round-off, slower)
-    closed_form: bool = True
-    #: local solves at residual hotspots between Newton iterations (MINI, where it applies:
-    #: :mod:`brainbulge.solver.fast.hotspot`; False: the plain path)
-    hotspot_relaxation: bool = True
-
-    # --- the linear solver ---------------------------------------------------------------
-    #: "pardiso" (direct) or "krylov" (GMRES with AMG blocks, inexact Newton)
-    linear_solver: str = "pardiso"
-    #: loosest relative tolerance ``eta`` of an inexact Newton's Krylov solve [-]
-    #: (:func:`brainbulge.solver.inexact.forcing_term`)
-    eta_max: float = 1e-4
-    #: a failed Krylov solve is retried once, tighter, with a fresh preconditioner (False:
-    #: the Newton solve fails at once, e.g. from a start state that a ramp can replace)
-    retry_linear: bool = True
-    #: the Krylov solver's budget, restart and AMG refresh (frozen group)
-    krylov: KrylovOptions = field(default_factory=KrylovOptions)
-    #: the hotspot relaxation's hotspot, patch and local Newton (frozen group)
-    hotspot: HotspotOptions = field(default_factory=HotspotOptions)
-
-    # --- the continuations (frozen groups: ``dataclasses.replace`` a group to change it) --
-    contrast: ContrastOptions = field(default_factory=ContrastOptions)
-    sequencing: SequencingOptions = field(default_factory=SequencingOptions)
-    rezoning: RezoningOptions = field(default_factory=RezoningOptions)
-    warm_start: WarmStartOptions = field(default_factory=WarmStartOptions)
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.steps, int) or self.steps < 1:
-            raise InputError(f"steps = {self.steps!r} must be a positive integer")
-        if not (0 < self.min_step <= 1):
-            raise InputError(f"min_step = {self.min_step!r} must lie in (0, 1]")
-        for name in ("tolerance", "intermediate_tolerance", "carried_curvature_tolerance"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"{name} = {getattr(self, name)!r} must be positive")
+    def __init__(self, **values: Any) -> None:
+        shorthand = {k: values.pop(k) for k in list(values) if k in SHORTHAND}
+        for f in fields(self):
+            if f.name in values:
+                value = values.pop(f.name)
+            elif f.default_factory is not MISSING:
+                value = f.default_factory()
+            else:
+                value = f.default
+            setattr(self, f.name, value)
+        if values:
+            raise TypeError(f"SolverOptions: unknown option(s) {', '.join(sorted(values))}")
+        by_group: dict[str, dict[str, Any]] = {}
+        for name, value in shorthand.items():
+            group, key = SHORTHAND[name]
+            by_group.setdefault(group, {})[key] = value
+        for group, changes in by_group.items():
+            setattr(self, group, replace(getattr(self, group), **changes))
         if not (0 <= self.start_load < 1):
             raise InputError(f"start_load = {self.start_load!r} must lie in [0, 1)")
-        if not isinstance(self.stagnation, int) or self.stagnation < 0:
-            raise InputError(f"stagnation = {self.stagnation!r} must be a non-negative "
-                             "integer (0: off)")
-        if not (ETA_MIN <= self.eta_max < 1):
-            raise InputError(f"eta_max = {self.eta_max!r} must lie in [{ETA_MIN:g}, 1)")
-        if self.linear_solver not in LINEAR_SOLVERS:
-            raise InputError(f"unknown linear solver {self.linear_solver!r}; choose one of "
-                             f"{', '.join(LINEAR_SOLVERS)}")
 
 
 @dataclass
@@ -369,6 +231,14 @@ class Solution:
     failure: Failure | None = None  # set when Newton diverged at the smallest load step
     note: str = ""  # why the ramp stopped otherwise (stop hooks, an equilibration)
     context: str = ""  # appended in parentheses (e.g. a rezoning that failed)
+    #: the route the solve took (:class:`~brainbulge.solver.strategy.Route`'s value)
+    route: str = "ramp"
+    #: mesh sequencing's coarse stage (:class:`~brainbulge.solver.remesh.sequencing.Sequenced`;
+    #: None without)
+    sequenced: Any = None
+    #: from a start state: True when Newton converged from it, False when the load was
+    #: ramped instead; None without a start state
+    started: bool | None = None
     #: every Newton solve of this solve, in order (:class:`~brainbulge.solver.newton.NewtonResult`)
     newton_results: list[Any] = field(default_factory=list)
 

@@ -1,20 +1,23 @@
 """The load ramp: the swelling ``Js(t) = 1 + t (Js - 1)`` raised step by step to ``t = 1``.
 
-:class:`NewtonSolver` owns the loop and calls Newton (:meth:`Newton.newton
-<brainbulge.solver.newton.Newton.newton>`, one nonlinear solve at a given load) at each load.
-Each load step raises the load factor by ``dt``, predicts the new state by extrapolating the
-last increment,
+:class:`LoadRamp` is the path the continuation driver walks
+(:func:`~brainbulge.solver.driver.walk`, which owns the step control), each step one Newton
+solve (:func:`~brainbulge.solver.newton.newton`) at the new load. Each load step raises the
+load factor by ``dt``, predicts the new state by extrapolating the last increment,
 
     x_pred = x_prev + (dt / dt_last) (x_prev - x_before),
 
 and solves from it; if that fails, once more from the last converged state. A step that still
-fails is cut in half, ``dt <- dt / 2``, and retried from the last converged state; a step that
-converged within 4 iterations lets the next grow, ``dt <- 1.5 dt``. The ramp stops with a
-:class:`Failure` (the load, the step, the last Newton attempt's residual, iterations and
-reason, and where its force residual peaked) when the step would fall below ``min_step``, and
-early when a stop hook of :class:`SolverOptions` says so. Below full load Newton converges
-only to ``intermediate_tolerance``. After every accepted step the state can go to a restart
-file (:mod:`brainbulge.solver.restart`), from which a stopped run resumes.
+fails is cut, ``dt <- cut dt``, and retried from the last converged state; a step that
+converged within ``fast_iterations`` lets the next grow, ``dt <- grow dt`` (``options.ramp``:
+0.5, 4 and 1.5). The ramp stops with a :class:`Failure` (the load, the step, the last Newton
+attempt's residual, iterations and reason, and where its force residual peaked) when the
+step would fall below ``min_step``, and early when a stop hook of :class:`SolverOptions` says
+so. Below full load Newton converges only to ``intermediate_tolerance``. After every accepted
+step the state can go to a restart file (:mod:`brainbulge.solver.restart`), from which a
+stopped run resumes. :class:`NewtonSolver` holds a form's equations and offers the ramp
+(:meth:`NewtonSolver.solve`), Newton at one load (:meth:`NewtonSolver.equilibrate`) and one
+Newton solve.
 """
 
 from __future__ import annotations
@@ -28,8 +31,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
-from brainbulge.model.problem import Problem
 from brainbulge.solver import restart
+from brainbulge.solver.driver import StepControl, Tried, walk
 from brainbulge.solver.equations import MixedEquations
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.mixed import MixedForm
@@ -58,7 +61,7 @@ class NewtonSolver:
         self.state = self.equations.state
         #: local solves at residual hotspots (MINI; option ``hotspot_relaxation``)
         self.relaxation = (HotspotRelaxation(self.equations, self.opt.hotspot)
-                           if self.opt.hotspot_relaxation and HotspotRelaxation.applies(form)
+                           if self.opt.newton.hotspot_relaxation and HotspotRelaxation.applies(form)
                            else None)
 
     def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
@@ -73,112 +76,28 @@ class NewtonSolver:
         self.equations.release_linear_solver()
 
     def solve(self) -> Solution:
-        """Ramp the load from ``start_load`` (or a restart file's load) to 1; return the
+        """Ramp the load from ``start_load`` (or a restart file's load) to 1
+        (:class:`LoadRamp` walked by :func:`~brainbulge.solver.driver.walk`); return the
         last converged state (the form holds it, at its load)."""
         check_feasible(self.equations)
-        form, opt, state = self.form, self.opt, self.state
         start = time.perf_counter()
-        sol = Solution(form=form, load=0.0, converged=False)
-        t, dt, predictor = self._start(sol)
-        last = state.snapshot()  # the last converged state
-        bar = tqdm(total=100, disable=not opt.progress, desc="load", unit="%", leave=False)
-        bar.update(round(100 * t))
-        try:
-            while t < FULL:
-                dt = min(dt, 1 - t)
-                res, its = self._attempt(t + dt, dt, last, predictor, sol)
-                if not res.converged:
-                    sol.rejected_steps += 1
-                    state.restore(last)
-                    if opt.stop_on_failure is not None and opt.stop_on_failure(t):
-                        sol.stopped_early = True
-                        sol.note = f"stopped at load {t:.4f} (stop_on_failure)"
-                        break
-                    log.info("  load %.4f: not converged (|R| = %.2e, %s), cutting step",
-                             t + dt, res.norm, res.detail)
-                    dt *= 0.5
-                    if dt < opt.min_step:
-                        sol.failure = Failure(load=t + 2 * dt, step=2 * dt, kept=t,
-                                              site=res.site, residual=res.norm,
-                                              iterations=res.iterations, reason=res.detail)
-                        break
-                    continue
-                pen = self.equations.max_penetration() if form.point_contacts else 0.0
-                increment = state.x.CreateVector()
-                increment.data = state.x - last.x
-                predictor = (increment, dt)
-                t += dt
-                last = state.snapshot()
-                bar.update(round(100 * t) - bar.n)
-                sol.steps.append(StepRecord(t, its, 0, res.norm, pen))
-                log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, its, res.norm)
-                if its <= 4:
-                    dt *= 1.5
-                if opt.checkpoint is not None:
-                    restart.write(Path(opt.checkpoint), opt.checkpoint_key, form, state.x, t,
-                                  dt, increment, predictor[1], sol)
-                if opt.stop_when is not None and t < FULL and opt.stop_when():
-                    sol.stopped_early = True
-                    sol.note = f"stopped at load {t:.4f} (stop_when)"
-                    break
-            else:
-                sol.converged = True
-        finally:
-            bar.close()
-            state.restore(last)
-            form.load.Set(t)
-        sol.load = t
+        sol = walk(LoadRamp(self))
         return finished(self.equations, sol, start)
 
-    def _start(self, sol: Solution) -> tuple[float, float, Predictor | None]:
-        """Where the ramp starts: ``(t, dt, predictor)`` from ``start_load`` and ``steps``,
-        or from the restart file (which also fills ``sol``'s steps)."""
-        opt = self.opt
-        if opt.checkpoint is not None:
-            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, self.form, sol)
-            if resumed is not None:
-                t, dt, increment, last_dt = resumed
-                sol.resumed_from = t
-                return t, dt, (increment, last_dt)
-        return opt.start_load, 1.0 / opt.steps, None
-
-    def _attempt(self, t: float, dt: float, last: Snapshot, predictor: Predictor | None,
-                 sol: Solution) -> tuple[NewtonResult, int]:
-        """Newton at load ``t`` (a step ``dt`` on) from the predicted state, extrapolating
-        the last increment, ``x_pred = x_last + (dt / dt_last) increment``, and, if that
-        fails, once more from the last converged state ``last`` (its ``x`` at the new load's
-        prescribed values, with the failed attempt's contact pressures). Returns the last
-        Newton result and the iterations of both."""
-        form, opt, state = self.form, self.opt, self.state
-        form.set_load(t)
-        if predictor is not None:
-            increment, last_dt = predictor
-            state.x.data = last.x + (dt / last_dt) * increment
-            form.set_load(t)  # exact prescribed values over the predictor
-        tol = opt.tolerance if t >= FULL else max(opt.tolerance, opt.intermediate_tolerance)
-        res = self.newton(tol)
-        sol.newton_results.append(res)
-        its = res.iterations
-        if not res.converged and predictor is not None:
-            state.restore(last, multipliers=False)
-            form.set_load(t)
-            res = self.newton(tol)
-            sol.newton_results.append(res)
-            its += res.iterations
-        return res, its
-
-    def equilibrate(self) -> Solution:
+    def equilibrate(self, curvature_below: float | None = None) -> Solution:
         """Newton at the form's current load from its current state (one carried over
         from another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's
         solution), to the final tolerance, without load steps, the curvature term of the
-        contacts entering the tangent only below ``carried_curvature_tolerance``. On
-        failure the state is restored and ``converged`` is false."""
+        contacts entering the tangent only below ``curvature_below`` (default
+        ``newton.carried_curvature_tolerance``; ``inf``: always). On failure the state is
+        restored and ``converged`` is false."""
         form, state = self.form, self.state
         start = time.perf_counter()
         t = state.load
         sol = Solution(form=form, load=t, converged=False)
         before = state.snapshot()
-        res = self.newton(curvature_below=self.opt.carried_curvature_tolerance)
+        res = self.newton(curvature_below=(self.opt.newton.carried_curvature_tolerance
+                                           if curvature_below is None else curvature_below))
         sol.newton_results.append(res)
         if res.converged:
             pen = self.equations.max_penetration() if form.point_contacts else 0.0
@@ -193,15 +112,144 @@ class NewtonSolver:
         return finished(self.equations, sol, start)
 
 
-def solve(
-    problem: Problem,
-    element: str = "taylor-hood",
-    options: SolverOptions | None = None,
-    compile_energy: bool = False,
-) -> Solution:
-    """Build the mixed form of ``problem`` and ramp the swelling to its target."""
-    form = MixedForm(problem, element=element, compile_energy=compile_energy)
-    return NewtonSolver(form, options).solve()
+class LoadBar:
+    """The progress bar over the load (shown with ``options.progress``), in percent."""
+
+    def __init__(self, show: bool, t: float) -> None:
+        self.bar = tqdm(total=100, disable=not show, desc="load", unit="%", leave=False)
+        self.at(t)
+
+    def at(self, t: float) -> None:
+        """The load reached is ``t`` [-]."""
+        self.bar.update(round(100 * t) - self.bar.n)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+class LoadRamp:
+    """The load ramp as a path of :func:`~brainbulge.solver.driver.walk`: the parameter is
+    the load factor ``t`` from ``start_load`` (or a restart file's load) to 1, each step
+    Newton from the predicted state (module docstring), the restart file written after every
+    accepted step, the stop hooks of :class:`SolverOptions` asked."""
+
+    target = 1.0
+
+    def __init__(self, solver: NewtonSolver) -> None:
+        self.solver = solver
+        self.form, self.opt, self.state = solver.form, solver.opt, solver.state
+        ramp = self.opt.ramp
+        self.control = StepControl(cut=ramp.cut, grow=ramp.grow,
+                                   fast_iterations=ramp.fast_iterations,
+                                   min_step=ramp.min_step)
+        self.predictor: Predictor | None = None
+        self.bar: LoadBar | None = None
+
+    def switch(self, solver: NewtonSolver) -> None:
+        """Go on with ``solver`` (another form: a rezoned mesh), without a predictor."""
+        self.solver = solver
+        self.form, self.state = solver.form, solver.state
+        self.predictor = None
+
+    def begin(self) -> tuple[float, float, Solution]:
+        """``(t, dt, sol)`` from ``start_load`` and ``steps``, or from the restart file
+        (which also fills ``sol``'s steps and sets the predictor)."""
+        opt = self.opt
+        sol = self.sol = Solution(form=self.form, load=0.0, converged=False)
+        t, dt = opt.start_load, 1.0 / opt.ramp.steps
+        if opt.checkpoint is not None:
+            resumed = restart.read(Path(opt.checkpoint), opt.checkpoint_key, self.form, sol)
+            if resumed is not None:
+                t, dt, increment, last_dt = resumed
+                sol.resumed_from = t
+                self.predictor = (increment, last_dt)
+        self.bar = LoadBar(opt.progress, t)
+        return t, dt, sol
+
+    def snapshot(self) -> Snapshot:
+        return self.state.snapshot()
+
+    def restore(self, snap: Snapshot) -> None:
+        self.state.restore(snap)
+
+    def attempt(self, t: float, dt: float, last: Snapshot) -> Tried:
+        """Newton at load ``t`` (a step ``dt`` on) from the predicted state, extrapolating
+        the last increment, ``x_pred = x_last + (dt / dt_last) increment``, and, if that
+        fails, once more from the last converged state ``last`` (its ``x`` at the new load's
+        prescribed values, with the failed attempt's contact pressures)."""
+        form, opt, state = self.form, self.opt, self.state
+        sol_results = self.sol.newton_results
+        form.set_load(t)
+        if self.predictor is not None:
+            increment, last_dt = self.predictor
+            state.x.data = last.x + (dt / last_dt) * increment
+            form.set_load(t)  # exact prescribed values over the predictor
+        newton_tol = opt.newton.tolerance
+        tol = newton_tol if t >= FULL else max(newton_tol, opt.ramp.intermediate_tolerance)
+        res = self.solver.newton(tol)
+        sol_results.append(res)
+        its = res.iterations
+        if not res.converged and self.predictor is not None:
+            state.restore(last, multipliers=False)
+            form.set_load(t)
+            res = self.solver.newton(tol)
+            sol_results.append(res)
+            its += res.iterations
+        return Tried(res.converged, its, res)
+
+    def accept(self, t: float, dt: float, last: Snapshot, tried: Tried,
+               sol: Solution) -> None:
+        """Record the step to ``t``; the increment from ``last`` is the next predictor."""
+        state = self.state
+        pen = self.solver.equations.max_penetration() if self.form.point_contacts else 0.0
+        increment = state.x.CreateVector()
+        increment.data = state.x - last.x
+        self.predictor = (increment, dt)
+        self.bar.at(t)
+        sol.steps.append(StepRecord(t, tried.iterations, 0, tried.result.norm, pen))
+        log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, tried.iterations,
+                 tried.result.norm)
+
+    def rejected(self, t: float, dt: float, tried: Tried, sol: Solution) -> bool:
+        """The step to ``t + dt`` failed: the hook ``stop_on_failure`` may stop here."""
+        opt = self.opt
+        if opt.stop_on_failure is not None and opt.stop_on_failure(t):
+            sol.stopped_early = True
+            sol.note = f"stopped at load {t:.4f} (stop_on_failure)"
+            return True
+        res = tried.result
+        log.info("  load %.4f: not converged (|R| = %.2e, %s), cutting step", t + dt,
+                 res.norm, res.detail)
+        return False
+
+    def failed(self, t: float, dt: float, tried: Tried, sol: Solution) -> None:
+        res = tried.result
+        sol.failure = Failure(load=t + dt, step=dt, kept=t, site=res.site, residual=res.norm,
+                              iterations=res.iterations, reason=res.detail)
+
+    def settled(self, t: float, dt: float, sol: Solution) -> bool:
+        """The restart file; the hook ``stop_when`` may stop here."""
+        opt = self.opt
+        if opt.checkpoint is not None:
+            increment, last_dt = self.predictor
+            restart.write(Path(opt.checkpoint), opt.checkpoint_key, self.form, self.state.x,
+                          t, dt, increment, last_dt, sol)
+        if opt.stop_when is not None and t < FULL and opt.stop_when():
+            sol.stopped_early = True
+            sol.note = f"stopped at load {t:.4f} (stop_when)"
+            return True
+        return False
+
+    def transfer(self, s: float, sol: Solution, failed: bool) -> float | None:
+        return None  # one discretisation throughout
+
+    def end(self, last: Snapshot, t: float, sol: Solution) -> Solution:
+        """The form at the last converged state and its load ``t``."""
+        self.bar.close()
+        self.state.restore(last)
+        self.form.load.Set(t)
+        sol.load = t
+        return sol
 
 
 def check_feasible(eq: MixedEquations) -> None:
@@ -232,5 +280,10 @@ def finished(solver: MixedEquations, sol: Solution, start: float) -> Solution:
     swelling = [float(v) for v in form.problem.swelling.values()]
     sol.target_swelling = max(swelling, key=lambda js: abs(js - 1), default=1.0)
     sol.wall_time_s = time.perf_counter() - start
-    return Costs(solver.t_assembly, solver.t_solve,
-                 int(sum(solver.linear.stats.iterations))).into(sol)
+    return costs_of(solver).into(sol)
+
+
+def costs_of(eq: MixedEquations) -> Costs:
+    """What ``eq``'s solves cost so far: assembly and linear-solve times [s], Krylov
+    iterations."""
+    return Costs(eq.t_assembly, eq.t_solve, int(sum(eq.linear.stats.iterations)))

@@ -75,8 +75,7 @@ from brainbulge.results.measures.summary import PointFields, point_fields, solut
 from brainbulge.results.present.sections import plot_sections, section_centre_mm
 from brainbulge.results.present.views3d import write_surface_views
 from brainbulge.results.records.run_record import atomic_write_json, atomic_write_text
-from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
-from brainbulge.solver.remesh.sequencing import solve_sequenced
+from brainbulge.solver import MixedForm, Solution, SolverOptions, Strategy, solve
 
 log = logging.getLogger("brainbulge")
 
@@ -147,15 +146,15 @@ def solve_brain(
 
     ``start(form) -> bool``: set the form's state to a start at full load (e.g. the solution
     of another flap on this mesh) and say whether it did; Newton then converges from there
-    (:meth:`NewtonSolver.equilibrate`), and ramps the load from ``Js = 1`` if that fails.
-    Not used with a restart file (the ramp goes on) or mesh sequencing."""
+    (:mod:`brainbulge.solver.warm_start`), and ramps the load from ``Js = 1`` if that fails.
+    Not used with a restart file (the ramp goes on) or mesh sequencing; the solver chooses
+    (:class:`~brainbulge.solver.strategy.Strategy`)."""
     case = config if isinstance(config, CraniectomyCase) else case_from_dict(dict(config))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     bm = brain_mesh if brain_mesh is not None else brain_mesh_for(case)
     skull = case_skull(bm, case)
     problem = brain_problem(bm, case, skull)
-    form = MixedForm(problem, element=case.element, compile_energy=case.compile)
     restart = out_dir / "restart.npz"
     inputs = {k: v for k, v in dataclasses.asdict(case).items()
               if k not in ("steps", "coarse_tets", "coarse_mesh")}
@@ -165,40 +164,22 @@ def solve_brain(
     options = SolverOptions(steps=case.steps, tolerance=case.tolerance, progress=progress,
                             linear_solver=case.linear_solver, checkpoint=restart,
                             checkpoint_key=key)
-    sequenced = started = None
-    if restart.is_file():  # an interrupted ramp on this mesh goes on where it stopped
-        coarse_bm = None
-    else:
+
+    def coarse_problem():
+        """Mesh sequencing's coarse problem, or None (the case has no coarse mesh)."""
         coarse_bm = coarse_brain_mesh if coarse_brain_mesh is not None else (
             coarse_brain_mesh_for(case, bm))
-    if coarse_bm is not None:
+        if coarse_bm is None:
+            return None
         _check_same_domain(coarse_bm, bm)
-        coarse = MixedForm(brain_problem(coarse_bm, case), element=case.element,
-                           compile_energy=case.compile)
-        sol, sequenced = solve_sequenced(coarse, form, options)
-        del coarse
-    else:
-        if start is not None and not restart.is_file() and start(form):
-            # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
-            solver = NewtonSolver(form, dataclasses.replace(
-                options, max_iterations=options.warm_start.max_iterations,
-                carried_curvature_tolerance=np.inf, retry_linear=False,
-                krylov=dataclasses.replace(options.krylov,
-                                           max_iterations=options.warm_start.krylov_iterations)))
-            sol = solver.equilibrate()
-            started = sol.converged
-            if not sol.converged:
-                log.info("  no convergence from the start state (%s): ramping the load",
-                         sol.message)
-                solver.release_linear_solver()
-                solver.state.reset()
-        if started is not True:
-            solver = NewtonSolver(form, options)
-            sol = solver.solve()
-        solver.release_linear_solver()
+        return brain_problem(coarse_bm, case)
+
+    sol = solve(problem, Strategy.from_problem(
+        problem, options, element=case.element, compile_energy=case.compile,
+        coarse=coarse_problem, start=start))
     if sol.converged:
         restart.unlink(missing_ok=True)
-    return BrainRun(case, bm, skull, form, sol, sequenced, started)
+    return BrainRun(case, bm, skull, sol.form, sol, sol.sequenced, sol.started)
 
 
 def write_brain_outputs(

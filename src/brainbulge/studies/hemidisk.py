@@ -48,8 +48,7 @@ from brainbulge.results.present.figures import (
     plot_side_by_side,
 )
 from brainbulge.results.records.run_record import atomic_output, atomic_write_json
-from brainbulge.solver import MixedForm, NewtonSolver, Solution, SolverOptions
-from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
+from brainbulge.solver import Rezoning, Solution, SolverOptions, Strategy, solve
 from brainbulge.studies.runner import stopped_summary
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
@@ -90,16 +89,14 @@ def run_hemidisk(
     problem = hemidisk_problem(case)
     geo = case.geometry
     options = SolverOptions(steps=case.steps, progress=progress)
-    if case.rezone:
+    rezoning = None
+    if case.rezone:  # how the deformed domain is meshed afresh (the solver decides when)
         rim_h = case.rim_h
         rezoning = Rezoning(lambda mesh: hemidisk_problem(case, mesh), geo.project,
                             case.mesh_size * case.R, case.corner_h, geo.singular_points(),
                             geo.rim_points(case.edge_exclusion * case.R, rim_h or 0.0), rim_h)
-        sol = solve_with_rezoning(problem, rezoning, case.element, options)
-    else:
-        solver = NewtonSolver(MixedForm(problem, element=case.element), options)
-        sol = solver.solve()
-        del solver
+    sol = solve(problem, Strategy.from_problem(problem, options, element=case.element,
+                                               rezoning=rezoning))
     form = sol.form
     centre = np.zeros(2)
     G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for both

@@ -127,7 +127,7 @@ def test_sequenced_solve_reaches_the_fine_solution_in_fewer_iterations(ramp) -> 
     assert [s.load for s in sol.steps] == [1.0]
     assert sol.newton_iterations < sol_ref.newton_iterations
     # the carried-over state's residual: the fine Newton's first, above the tolerance
-    assert record.initial_residual > OPTIONS.tolerance
+    assert record.initial_residual > OPTIONS.newton.tolerance
     u_ref = _vertex_u(fine_ref)
     assert np.abs(_vertex_u(fine) - u_ref).max() < 1e-4 * np.abs(u_ref).max()
     lam_ref = fine_ref.point_contacts[0].lam
@@ -231,9 +231,9 @@ def test_the_coarse_stage_stops_at_its_own_tolerance() -> None:
     coarse, fine = _forms()
     sol, record = solve_sequenced(coarse, fine, OPTIONS)
     assert sol.converged and record.coarse_converged
-    assert COARSE_TOLERANCE > OPTIONS.tolerance
+    assert COARSE_TOLERANCE > OPTIONS.newton.tolerance
     assert COARSE_TOLERANCE * 1e-3 < residual(coarse) <= COARSE_TOLERANCE
-    assert residual(fine) <= OPTIONS.tolerance
+    assert residual(fine) <= OPTIONS.newton.tolerance
     tight, _ = _forms()
     assert NewtonSolver(tight, OPTIONS).solve().newton_iterations > record.coarse_newton_iterations
 

@@ -17,8 +17,6 @@ from brainbulge.errors import InputError
 from brainbulge.solver.linear.sparse_reuse import PatternGather
 
 SMOOTHER_KEYS = ("presmoother", "postsmoother")
-#: symmetric Gauss-Seidel sweeps on each side of the coarse correction (:meth:`AMGCycle._smoothers`)
-SWEEPS = 1
 
 
 def _smoother_setup(name: str):
@@ -45,13 +43,14 @@ class AMGCycle:
     """
 
     def __init__(self, n_pad: int, slot: np.ndarray, blocksize: int, B: np.ndarray | None,
-                 options: dict, index: np.ndarray | None = None) -> None:
+                 options: dict, index: np.ndarray | None = None, *, sweeps: int) -> None:
         self.n_pad = n_pad
         self.slot = slot
         self.empty = np.setdiff1d(np.arange(n_pad), slot)
         self.blocksize = blocksize
         self.B = B
         self.options = options
+        self.sweeps = sweeps  # symmetric Gauss-Seidel sweeps each side (KrylovOptions)
         self.index = index
         self.ml = None
         # the finest level of each new matrix, padded by a plan made once per pattern
@@ -115,7 +114,7 @@ class AMGCycle:
         three extra over the CSF rows only    139 (130 s), restart 100; eight: 167
         ====================================  ===========================================
         """
-        sweeps = ("gauss_seidel", {"sweep": "symmetric", "iterations": SWEEPS})
+        sweeps = ("gauss_seidel", {"sweep": "symmetric", "iterations": self.sweeps})
         pre = self.options.get("presmoother", sweeps)
         post = self.options.get("postsmoother", sweeps)
         for name, _ in (pre, post):

@@ -56,14 +56,6 @@ from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
 
-# Weak couplings of the SIMPLE Schur approximation dropped before its AMG. Its distance-2
-# stencil (B D^-1 B^T) has many weak entries that "strength: symmetric, theta 0" aggregates
-# as strong; dropping them below 0.05 sqrt(|S_ii S_jj|) made the AMG both cheaper and better.
-# Measured on the 111k-tet brain (left flap, both sides, krylov): one tangent 55 -> 37 GMRES
-# iterations and 0.10 -> 0.07 s per preconditioner application; the whole scenario 906 ->
-# 481 GMRES iterations, 13 -> 10 Newton iterations, 129 -> 69 s linear solves.
-SCHUR_DROP = 0.05
-
 
 @dataclass
 class KrylovStats:
@@ -116,6 +108,7 @@ class BlockKrylovSolver:
         self.maxiter = krylov.max_iterations
         self.restart = krylov.restart
         self.refresh_factor = krylov.refresh_factor
+        self.schur_drop = krylov.schur_drop
         self._schur_stale = True  # S~ to be rebuilt at the next solve
         self.stats = KrylovStats()
         self._ref_iterations: int | None = None
@@ -133,9 +126,11 @@ class BlockKrylovSolver:
         # MINI: the AMG alone, on K's displacement rows; Taylor-Hood: around it (on the P1
         # rows of the displacement block), Gauss-Seidel on the P2 block
         amg_1 = AMGCycle(dim * len(nodes), slot, dim, B, amg or {},
-                         index=self.iu if lin.all() else np.flatnonzero(lin))
+                         index=self.iu if lin.all() else np.flatnonzero(lin),
+                         sweeps=krylov.smoother_sweeps)
         self.amg_u = amg_1 if lin.all() else HierarchicalTwoLevel(self.iu, amg_1)
-        self.amg_p = AMGCycle(len(self.ip), np.arange(len(self.ip)), 1, None, amg or {})
+        self.amg_p = AMGCycle(len(self.ip), np.arange(len(self.ip)), 1, None, amg or {},
+                              sweeps=krylov.smoother_sweeps)
 
     @classmethod
     def from_form(cls, form, krylov: KrylovOptions | None = None, **options
@@ -171,9 +166,9 @@ class BlockKrylovSolver:
 
     def schur_matrix(self, a_diag: np.ndarray, Bt, C) -> sp.csr_matrix:
         """``S~ = C + B diag(A)^-1 B^T`` (SIMPLE's Schur complement) over the pressures
-        (``a_diag``: the diagonal of ``A``), its
-        couplings weaker than ``SCHUR_DROP sqrt(|S_ii S_jj|)`` lumped onto the diagonal
-        (stays SPD, a cheaper V-cycle). A subclass may approximate ``S`` otherwise.
+        (``a_diag``: the diagonal of ``A``), its couplings weaker than ``schur_drop
+        sqrt(|S_ii S_jj|)`` (:class:`KrylovOptions`) lumped onto the diagonal (stays SPD, a
+        cheaper V-cycle). A subclass may approximate ``S`` otherwise.
 
         The weak entries are dropped from the CSR arrays and the lumps added to the stored
         diagonal in place: no COO copy of the distance-2 stencil, no second CSR."""
@@ -183,7 +178,7 @@ class BlockKrylovSolver:
         S.sum_duplicates()
         dg = S.diagonal()
         row = np.repeat(np.arange(n_p, dtype=S.indices.dtype), np.diff(S.indptr))
-        weak = np.abs(S.data) < SCHUR_DROP * np.sqrt(np.abs(dg[row] * dg[S.indices]))
+        weak = np.abs(S.data) < self.schur_drop * np.sqrt(np.abs(dg[row] * dg[S.indices]))
         weak &= row != S.indices
         lump = np.bincount(row[weak], np.abs(S.data[weak]), minlength=n_p)
         indptr = np.zeros(n_p + 1, dtype=np.int64)

@@ -1,20 +1,21 @@
 """Load stepping with rezoning (2D): the mesh is exchanged when its image degenerates.
 
-:class:`NewtonSolver` ramps the load on one mesh. Here the ramp stops after an accepted load
-step when the deformed triangles' smallest shape quality ``q = 4 sqrt(3) A / sum l^2`` falls
-below ``q_min`` (or when a step fails on a mesh that has deformed since the last rezoning),
-the deformed domain is meshed afresh and pulled back to the reference configuration
-(:func:`brainbulge.geometry.rezone.rezone`), the state ``(u, p, lambda)`` is carried over,
-and the ramp goes on from the same load. The material is hyperelastic, so the converged
-state at a load does not depend on the mesh history: rezoning changes the discretisation,
-not the problem. The carried-over state is first equilibrated at the same load (in at most
-``equilibration_iterations`` Newton iterations); if that (or the
+The load ramp (:class:`~brainbulge.solver.ramp.LoadRamp`) walks the load on one mesh;
+:class:`RezoningRamp` holds it and adds the continuation's transfer between steps: after an
+accepted load step below full load whose deformed triangles' smallest shape quality ``q = 4
+sqrt(3) A / sum l^2`` has fallen below ``q_min`` (or after a step that failed on a mesh that
+has deformed since it was made), the deformed domain is meshed afresh and pulled back to the
+reference configuration (:func:`brainbulge.geometry.rezone.rezone`), the state ``(u, p,
+lambda)`` is carried over, and the ramp goes on from the same load. The material is
+hyperelastic, so the converged state at a load does not depend on the mesh history: rezoning
+changes the discretisation, not the problem. The carried-over state is first equilibrated at
+the same load (in at most ``equilibration_iterations`` Newton iterations); if that (or the
 remeshing) fails, the old mesh keeps its converged state and the ramp goes on there without
 rezoning. That old mesh may itself be a rezoned one, so a run can end earlier than the plain
 ramp on the first mesh would: sliding alpha 80 / beta 30 reaches load 0.62 with rezoning and
-0.77 without it (docs/known-limits.md). ``q_min``, ``equilibration_iterations`` and
-``max_rezones`` are ``SolverOptions.rezoning``
-(:class:`~brainbulge.solver.options.RezoningOptions`).
+0.77 without it (docs/known-limits.md); after ``max_rezones`` rezonings it goes on without
+them too. ``q_min``, ``equilibration_iterations`` and ``max_rezones`` are
+``SolverOptions.rezoning`` (:class:`~brainbulge.solver.options.RezoningOptions`).
 """
 
 from __future__ import annotations
@@ -38,10 +39,12 @@ from brainbulge.geometry.rezone import (
 )
 from brainbulge.model.problem import Problem
 from brainbulge.solver.contact.points import edge_bubble_midpoint_value
+from brainbulge.solver.driver import Tried, walk
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Costs, Solution, SolverOptions
-from brainbulge.solver.ramp import NewtonSolver
+from brainbulge.solver.ramp import FULL, LoadRamp, NewtonSolver, check_feasible, costs_of, finished
 from brainbulge.solver.remesh.sequencing import carry_contact_pressures
+from brainbulge.solver.state import Snapshot
 
 log = logging.getLogger("brainbulge")
 
@@ -68,69 +71,126 @@ def solve_with_rezoning(
     element: str = "taylor-hood",
     options: SolverOptions | None = None,
 ) -> Solution:
-    """Ramp the swelling to full load, rezoning as needed; the solution's form holds the
-    final mesh and state. ``Solution.rezones`` counts the mesh exchanges."""
-    options = options or SolverOptions()
+    """Ramp the swelling to full load, rezoning as needed (:class:`RezoningRamp` walked by
+    :func:`~brainbulge.solver.driver.walk`); the solution's form holds the final mesh and
+    state. ``Solution.rezones`` counts the mesh exchanges."""
     start = time.perf_counter()
-    form = MixedForm(problem, element=element)
-    total: Solution | None = None
-    t, rezones = options.start_load, 0
-    failed = ""  # why the last rezoning failed: then the ramp goes on without it
-    while True:
-        def degenerate(f: MixedForm = form) -> bool:
-            return float(deformed_quality(f.mesh, f.u).min()) < options.rezoning.q_min
+    path = RezoningRamp(problem, rezoning, element, options or SolverOptions())
+    check_feasible(path.ramp.solver.equations)
+    return path.finish(walk(path), start)
 
-        def moved(t_now: float, t_mesh: float = t) -> bool:
-            return t_now > t_mesh + 1e-9  # a failure on a mesh that has deformed since
 
-        hooks = {} if failed else {"stop_when": degenerate, "stop_on_failure": moved}
-        # a solver per segment (its times too: summed by _merged)
-        solver = NewtonSolver(form, dataclasses.replace(options, start_load=t, **hooks))
-        sol = solver.solve()
-        total = sol if total is None else _merged(total, sol)
-        if sol.converged or rezones >= options.rezoning.max_rezones:
-            break
-        if not sol.stopped_early:
-            break  # failed on a fresh mesh: rezoning cannot help
+class RezoningRamp:
+    """The load ramp (:class:`~brainbulge.solver.ramp.LoadRamp`, which it holds) with a
+    transfer between steps: after an accepted step below full load whose deformed mesh has
+    degenerated (``q < q_min``), or after a failed step on a mesh that has deformed since it
+    was made, the mesh is exchanged (:meth:`transfer`, module docstring) and the ramp goes
+    on from the same load with its first step and no predictor. After a rezoning that fails,
+    or ``max_rezones`` of them, the ramp goes on without rezoning."""
+
+    target = 1.0
+
+    def __init__(self, problem: Problem, rezoning: Rezoning, element: str,
+                 options: SolverOptions) -> None:
+        self.rezoning, self.element, self.options = rezoning, element, options
+        self.ramp = LoadRamp(NewtonSolver(MixedForm(problem, element=element), options))
+        self.control = self.ramp.control
+        self.t_mesh = options.start_load  # the load at which the current mesh was made
+        self.rezones = 0
+        self.gave_up = ""  # why the last rezoning failed: then the ramp goes on without it
+        self.costs = Costs()  # of the solvers of the meshes left behind
+
+    def begin(self) -> tuple[float, float, Solution]:
+        return self.ramp.begin()
+
+    def snapshot(self) -> Snapshot:
+        return self.ramp.snapshot()
+
+    def restore(self, snap: Snapshot) -> None:
+        self.ramp.restore(snap)
+
+    def attempt(self, t: float, dt: float, last: Snapshot) -> Tried:
+        return self.ramp.attempt(t, dt, last)
+
+    def accept(self, t: float, dt: float, last: Snapshot, tried: Tried,
+               sol: Solution) -> None:
+        self.ramp.accept(t, dt, last, tried, sol)
+
+    def rejected(self, t: float, dt: float, tried: Tried, sol: Solution) -> bool:
+        return self.ramp.rejected(t, dt, tried, sol)
+
+    def failed(self, t: float, dt: float, tried: Tried, sol: Solution) -> None:
+        self.ramp.failed(t, dt, tried, sol)
+
+    def settled(self, t: float, dt: float, sol: Solution) -> bool:
+        return self.ramp.settled(t, dt, sol)
+
+    def end(self, last: Snapshot, t: float, sol: Solution) -> Solution:
+        return self.ramp.end(last, t, sol)
+
+    def transfer(self, t: float, sol: Solution, failed: bool) -> float | None:
+        """At load ``t`` after an accepted (``failed`` false) or a failed step: the mesh
+        exchanged if it is due, and the ramp's next step (None: not due, go on)."""
+        form, opt = self.ramp.form, self.options
+        if self.gave_up or self.rezones >= opt.rezoning.max_rezones:
+            return None
+        if failed:
+            due = t > self.t_mesh  # a failure on a mesh that has deformed since
+        else:
+            due = t < FULL and float(deformed_quality(form.mesh, form.u).min()) < opt.rezoning.q_min
+        if not due:
+            return None
         q = float(deformed_quality(form.mesh, form.u).min())
-        log.info("  rezoning at load %.4f (smallest deformed quality %.3f)", sol.load, q)
+        log.info("  rezoning at load %.4f (smallest deformed quality %.3f)", t, q)
         try:
-            rz = rezone(form.mesh, form.u, rezoning.project, rezoning.h, rezoning.h_corner,
-                        rezoning.corners, rezoning.rim_points, rezoning.h_rim)
-            new = MixedForm(rezoning.problem_on(rz.mesh), element=element)
-            transfer_state(form, new, rz)
-            new_solver = NewtonSolver(
-                new, dataclasses.replace(
-                    options, max_iterations=options.rezoning.equilibration_iterations))
-            new.set_load(sol.load)
-            # equilibrate the carried-over state on the new mesh before the ramp goes on
-            res = new_solver.newton()
-            its = res.iterations
-            log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
-                     sol.load, res.residuals[0], res.norm, its)
-            if not res.converged:
-                raise ConvergenceError(f"the carried-over state did not equilibrate "
-                                       f"(|R| = {res.norm:.2e} after {its} iterations: "
-                                       f"{res.detail})")
+            new, its = self._rezoned(form, t)
         except (ConvergenceError, RuntimeError, NgException) as exc:
             # the old mesh keeps the last converged state; go on there without rezoning
-            failed = f"rezoning at load {sol.load:.4f} failed: {exc}"
-            log.warning("  %s; going on without rezoning", failed)
-            t = sol.load
-            continue
-        form, t = new, sol.load
-        total.steps[-1].newton_iterations += its
-        rezones += 1
-    total.form = form
-    total.converged = sol.converged
-    total.stopped_early = False
-    total.rezones = rezones
-    total.wall_time_s = time.perf_counter() - start
-    if not sol.converged and not sol.message:
-        total.note = f"stopped at load {sol.load:.4f}"
-    if failed and not sol.converged:
-        total.context = failed
-    return total
+            self.gave_up = f"rezoning at load {t:.4f} failed: {exc}"
+            log.warning("  %s; going on without rezoning", self.gave_up)
+            new = form
+        else:
+            sol.steps[-1].newton_iterations += its
+            self.rezones += 1
+        self.costs.add(costs_of(self.ramp.solver.equations))
+        self.ramp.switch(NewtonSolver(new, opt))  # a solver per mesh (its costs summed)
+        self.t_mesh = t
+        return 1.0 / opt.ramp.steps
+
+    def _rezoned(self, form: MixedForm, t: float) -> tuple[MixedForm, int]:
+        """The deformed domain meshed afresh, the state carried over and equilibrated at
+        load ``t``: the new form and the equilibration's Newton iterations."""
+        rz_ = self.rezoning
+        rz = rezone(form.mesh, form.u, rz_.project, rz_.h, rz_.h_corner, rz_.corners,
+                    rz_.rim_points, rz_.h_rim)
+        new = MixedForm(rz_.problem_on(rz.mesh), element=self.element)
+        transfer_state(form, new, rz)
+        new_solver = NewtonSolver(new, dataclasses.replace(
+            self.options, max_iterations=self.options.rezoning.equilibration_iterations))
+        new.set_load(t)
+        # equilibrate the carried-over state on the new mesh before the ramp goes on
+        res = new_solver.newton()
+        its = res.iterations
+        log.info("  rezoned mesh at load %.4f: |R| %.2e -> %.2e in %d Newton iterations",
+                 t, res.residuals[0], res.norm, its)
+        if not res.converged:
+            raise ConvergenceError(f"the carried-over state did not equilibrate "
+                                   f"(|R| = {res.norm:.2e} after {its} iterations: "
+                                   f"{res.detail})")
+        return new, its
+
+    def finish(self, sol: Solution, start: float) -> Solution:
+        """The walk's solution on the last mesh, with the costs of every mesh's solver."""
+        sol = finished(self.ramp.solver.equations, sol, start)
+        self.costs.add(sol).into(sol)
+        sol.form = self.ramp.form
+        sol.stopped_early = False
+        sol.rezones = self.rezones
+        if not sol.converged and not sol.message:
+            sol.note = f"stopped at load {sol.load:.4f}"
+        if self.gave_up and not sol.converged:
+            sol.context = self.gave_up
+        return sol
 
 
 def _straighten_folded(form: MixedForm) -> None:
@@ -150,14 +210,6 @@ def _straighten_folded(form: MixedForm) -> None:
         for k in bad:
             for e in mesh[ngs.ElementId(ngs.VOL, int(k))].edges:
                 uvec[list(V.GetDofNrs(ngs.NodeId(ngs.EDGE, e.nr)))] = 0.0
-
-
-def _merged(a: Solution, b: Solution) -> Solution:
-    """``b`` continuing ``a`` (steps, counts and times added)."""
-    b.steps = a.steps + b.steps
-    b.rejected_steps += a.rejected_steps
-    b.newton_results = a.newton_results + b.newton_results
-    return Costs().add(b).add(a).into(b)
 
 
 def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:

@@ -55,6 +55,7 @@ from brainbulge.errors import InputError
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates, vertex_dofs
 from brainbulge.geometry.rezone import vertex_values
 from brainbulge.solver.contrast import equilibrate_through_contrast
+from brainbulge.solver.driver import fallback
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import NewtonSolver
@@ -197,7 +198,7 @@ def solve_sequenced(
     t0 = time.perf_counter()
     if coarse_solution is None:
         coarse_opt = dataclasses.replace(options, checkpoint=None, progress=False,
-                                         tolerance=max(options.tolerance,
+                                         tolerance=max(options.newton.tolerance,
                                                        options.sequencing.coarse_tolerance))
         coarse_solver = NewtonSolver(coarse, coarse_opt)
         csol = coarse_solver.solve()
@@ -208,7 +209,15 @@ def solve_sequenced(
              coarse.mesh.ne, csol.load, csol.newton_iterations, csol.wall_time_s)
     record = Sequenced(coarse.mesh.ne, csol.converged, csol.newton_iterations,
                        time.perf_counter() - t0, 0.0, None, False)
-    if csol.converged:
+
+    def through_contrast() -> Solution | None:
+        """The coarse state carried to ``fine``, then the contrast path (None: the coarse
+        stage did not converge)."""
+        if not csol.converged:
+            log.warning("  the coarse mesh stopped at load %.4f (%s); ramping the load on "
+                        "the fine mesh from Js = 1", csol.load, csol.message)
+            return None
+
         def carry(form: MixedForm) -> None:
             t1 = time.perf_counter()
             interpolate_state(coarse, form, options.sequencing.fold_ratio)
@@ -216,18 +225,23 @@ def solve_sequenced(
 
         sol, record.initial_residual = equilibrate_through_contrast(fine, options, carry)
         record.fine_converged = sol.converged
-        if sol.converged:
-            return _with_coarse_costs(sol, csol, t0), record
-        log.warning("  the coarse solution did not converge on the fine mesh (%s); "
-                    "ramping the load there from Js = 1", sol.message)
-    else:
-        log.warning("  the coarse mesh stopped at load %.4f (%s); ramping the load on the "
-                    "fine mesh from Js = 1", csol.load, csol.message)
-    solver = NewtonSolver(fine, options)
+        if not sol.converged:
+            log.warning("  the coarse solution did not converge on the fine mesh (%s); "
+                        "ramping the load there from Js = 1", sol.message)
+        return sol
+
+    sol = fallback(through_contrast, lambda: ramp_from_rest(fine, options))
+    return _with_coarse_costs(sol, csol, t0), record
+
+
+def ramp_from_rest(form: MixedForm, options: SolverOptions) -> Solution:
+    """The load ramp on ``form`` from ``Js = 1`` (its state reset first); the linear solver's
+    memory is released."""
+    solver = NewtonSolver(form, options)
     solver.state.reset()
     sol = solver.solve()
     solver.release_linear_solver()
-    return _with_coarse_costs(sol, csol, t0), record
+    return sol
 
 
 def _with_coarse_costs(sol: Solution, coarse: Solution, t0: float) -> Solution:
