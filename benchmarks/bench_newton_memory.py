@@ -9,7 +9,7 @@ is reset (``/proc/self/clear_refs`` 5) when a phase starts and read when it ends
     python benchmarks/bench_newton_memory.py --mesh /path/to/brain.npz [--iterations 2]
 
 Phases: the problem (mesh, skull, forms), the closed-form tangent's set-up (the Newton
-solver), then per Newton iteration the tangent (assembly and the free part), the linear
+solver), then per Newton iteration the tangent (assembled on the free DOFs), the linear
 system (contact elimination, the Krylov blocks), the AMG set-up (hierarchies of the
 displacement block and of the Schur approximation; the first iteration only), GMRES, and
 the rest (residuals of the line search). Columns: peak MB in the phase, RSS MB at its end.
@@ -122,7 +122,7 @@ def held_table(eq) -> str:
     seen: set[int] = set()
     lin = eq.linear
     parts = [("closed-form tangent (pattern, bubble operators)", eq.closed),
-             ("free-part plan", eq._free_part),
+             ("free-part plan (NGSolve's tangent only)", eq._free_part),
              ("contact elimination plan", eq._project_elimination),
              ("Krylov block plans", lin._block_plans),
              ("displacement AMG (plan, hierarchy)", lin.amg_u),

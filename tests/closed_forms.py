@@ -39,3 +39,19 @@ def assert_local_systems_agree(local, X: np.ndarray) -> None:  # noqa: ANN001 - 
     assert np.abs(R_ad).max() > 0
     assert np.abs(R - R_ad).max() <= 1e-12 * np.abs(R_ad).max()
     assert abs(K - K_ad).max() <= 1e-12 * abs(K_ad).max()
+
+
+def assert_free_pattern_is_the_free_part(form: MixedForm, mt, closed_type: type) -> None:  # noqa: ANN001
+    """The tangent assembled on the free DOFs' pattern (``closed_type(form, free)``, as
+    Newton's equations make it) equals the free rows and columns of the full one (``mt``'s,
+    on all DOFs): the same pattern, the same values."""
+    free = np.flatnonzero(np.array(list(form.fes.FreeDofs(True)), dtype=bool))
+    assert not np.isin(mt.ext_dofs, free).all()  # fixed DOFs among the elements' DOFs
+    x = form.gfu.vec.FV().NumPy()
+    ref = mt.assemble(x)[free][:, free]
+    ref.sort_indices()
+    K = closed_type(form, free).assemble(x)
+    assert K.shape == (len(free), len(free)) and K.has_sorted_indices
+    assert np.array_equal(K.indptr, ref.indptr) and np.array_equal(K.indices, ref.indices)
+    assert np.array_equal(K.data, ref.data) and np.abs(K.data).max() > 0
+    assert not (K.indices.flags.writeable or K.indptr.flags.writeable)  # shared by plans

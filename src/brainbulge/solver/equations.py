@@ -40,6 +40,8 @@ class MixedEquations:
         self.state = State(form)  # x, lambda, t: what a solve changes
         self.linear: LinearSolver = make_linear_solver(options.linear.solver, form,
                                                        options.krylov)
+        fes = form.fes
+        self.free = np.flatnonzero(np.array(list(fes.FreeDofs(form.condense)), dtype=bool))
         self.closed = None  # the closed-form residual and tangent, where they apply
         if form.element == "mini" and options.newton.closed_form:
             # (Numba, ~0.5 s: imported only where it may apply)
@@ -49,11 +51,9 @@ class MixedEquations:
                             else (mini_plane, mini_plane.PlaneMiniTangent))
             if kind.applies(form):
                 try:
-                    self.closed = closed(form)
+                    self.closed = closed(form, self.free)  # its tangent on the free DOFs
                 except ValueError as exc:  # a numbering or element it does not know
                     log.warning("closed-form tangent not used (%s); NGSolve's instead", exc)
-        fes = form.fes
-        self.free = np.flatnonzero(np.array(list(fes.FreeDofs(form.condense)), dtype=bool))
         is_u = np.zeros(fes.ndof, dtype=bool)
         r = fes.Range(0)
         is_u[r.start : r.stop] = True
@@ -84,7 +84,8 @@ class MixedEquations:
 
     def _new_plans(self) -> None:
         """The tangent's pattern is the same at every iteration: it is sliced and added to
-        by plans (:mod:`brainbulge.solver.linear.sparse_reuse`), made at the first tangent."""
+        by plans (:mod:`brainbulge.solver.linear.sparse_reuse`), made at the first tangent
+        (the free part: NGSolve's tangent only; the closed form assembles on the free DOFs)."""
         self._free_part = PatternGather(lambda K: K[self.free][:, self.free])
         self._add_curvature = PatternAdd()
         self._project_elimination = PatternProject()
@@ -128,7 +129,7 @@ class MixedEquations:
         """``K = dR/dx`` (condensed) on the free DOFs, with the contacts' curvature terms
         (left out with ``curvature`` false: a modified Newton method)."""
         t0 = time.perf_counter()
-        if self.closed is not None:
+        if self.closed is not None:  # assembled on the free DOFs' pattern
             K = self.closed.assemble(x.FV().NumPy())
         else:
             with ngs.TaskManager():  # threads for assembly only: idle NGSolve threads slow MKL
@@ -138,7 +139,7 @@ class MixedEquations:
             # a view of NGSolve's matrix, only read: the free part is gathered out of it
             K = sp.csr_matrix((np.asarray(data), indices, indptr),
                               shape=(mat.height, mat.width))
-        K = self._free_part(K)
+            K = self._free_part(K)
         for C in self.contact.curvatures(x.FV().NumPy(), curvature):
             K = self._add_curvature(K, self._restrict_free(C))
         self.t_assembly += time.perf_counter() - t0

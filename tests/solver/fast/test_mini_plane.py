@@ -17,7 +17,11 @@ from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.fast.mini_plane import PlaneMiniTangent, applies
-from closed_forms import assert_local_systems_agree, assert_same_newton_path
+from closed_forms import (
+    assert_free_pattern_is_the_free_part,
+    assert_local_systems_agree,
+    assert_same_newton_path,
+)
 
 
 def _form(contact: str = "sliding", element: str = "mini") -> MixedForm:
@@ -74,6 +78,10 @@ def test_tangent_and_bubble_operators_equal_ngsolves(form_and_state) -> None:
         got = got[free] if op is form.a.harmonic_extension_trans else got
         assert np.linalg.norm(ref) > 0
         assert np.linalg.norm(got - ref) <= 1e-10 * np.linalg.norm(ref)
+
+
+def test_tangent_on_the_free_dofs_is_the_free_part_of_the_full_one(form_and_state) -> None:
+    assert_free_pattern_is_the_free_part(*form_and_state, PlaneMiniTangent)
 
 
 def test_a_folded_state_gives_a_non_finite_residual_and_tangent(form_and_state) -> None:

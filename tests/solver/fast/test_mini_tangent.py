@@ -19,7 +19,11 @@ from brainbulge.solver import MixedForm, NewtonSolver
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.fast.mini_kernels import hessian
 from brainbulge.solver.fast.mini_tangent import MiniTangent, applies
-from closed_forms import assert_local_systems_agree, assert_same_newton_path
+from closed_forms import (
+    assert_free_pattern_is_the_free_part,
+    assert_local_systems_agree,
+    assert_same_newton_path,
+)
 
 SOFT = MooneyRivlin(0.03, 33.3)
 STIFF = MooneyRivlin(0.28, 333.0)
@@ -93,6 +97,13 @@ def test_tangent_and_bubble_operators_equal_ngsolves(form_and_state) -> None:
         ref = y.FV().NumPy()
         assert np.linalg.norm(ref) > 0
         assert np.linalg.norm(mine(r.FV().NumPy()) - ref) <= 1e-10 * np.linalg.norm(ref)
+
+
+def test_tangent_on_the_free_dofs_is_the_free_part_of_the_full_one(form_and_state) -> None:
+    form, mt = form_and_state
+    assert_free_pattern_is_the_free_part(form, mt, MiniTangent)
+    ns = NewtonSolver(form)  # Newton's equations assemble on the free DOFs
+    assert ns.equations.closed._pattern.shape == (len(ns.equations.free),) * 2
 
 
 def test_residual_equals_ngsolves(form_and_state) -> None:

@@ -338,10 +338,11 @@ def _element(e, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp, K, gd):  # noqa
 
 @numba.njit(cache=True, parallel=True)
 def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  # noqa: ANN001, ANN202
-              indptr, indices, data, Kbb_inv, E):
+              rows, indptr, indices, data, Kbb_inv, E):
     """Condensed element matrices added into ``data`` (CSR pattern with sorted columns that
     holds every element's DOF pairs), chunk by chunk: the chunks of one colour share no
-    vertex, so they run in parallel. Returns the
+    vertex, so they run in parallel. ``rows``: each DOF's row and column in the pattern
+    (-1: left out, such as a fixed DOF; ascending where kept). Returns the
     number of degenerate elements (zero volume or a singular bubble block)."""
     bad = 0
     for c in range(len(chunks) - 1):  # colours: chunks[c] .. chunks[c + 1] index ``order``
@@ -350,6 +351,7 @@ def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  #
         for t in numba.prange(n_par):
             K = np.empty((19, 19))
             gd = np.empty(16, dtype=np.int64)
+            gr = np.empty(16, dtype=np.int64)
             Kbb = np.empty((3, 3))
             inv = np.empty((3, 3))
             start = lo + (hi - lo) * t // n_par
@@ -371,12 +373,18 @@ def _assemble(order, chunks, verts, coords, x, nH1, nv, zoff, c1, c2, cb, qp,  #
                     for r in range(16):  # E = -K_bb^-1 K_be
                         E[e, i, r] = -(inv[i, 0] * K[16, r] + inv[i, 1] * K[17, r]
                                        + inv[i, 2] * K[18, r])
-                srt = np.argsort(gd)  # the element's columns in ascending order
                 for r in range(16):
-                    pos = indptr[gd[r]]  # walk the row once, merging with the columns
+                    gr[r] = rows[gd[r]]
+                srt = np.argsort(gr)  # the element's columns in ascending order
+                for r in range(16):
+                    if gr[r] < 0:
+                        continue
+                    pos = indptr[gr[r]]  # walk the row once, merging with the columns
                     for m in range(16):
                         s2 = srt[m]
-                        col = gd[s2]
+                        col = gr[s2]
+                        if col < 0:
+                            continue
                         while indices[pos] < col:
                             pos += 1
                         data[pos] += (K[r, s2] + K[r, 16] * E[e, 0, s2]

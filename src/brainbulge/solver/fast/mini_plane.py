@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
-from brainbulge.solver.fast.element_graph import element_pattern
+from brainbulge.solver.fast.element_graph import element_pattern, numbering
 from brainbulge.solver.fast.mini_kernels import hessian_entries, psi_derivatives
 from brainbulge.solver.fast.mini_tangent import MiniTangent
 
@@ -154,7 +154,8 @@ def _residual(verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, R):  # noqa: ANN0
 @numba.njit(cache=True)
 def _tangent(verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, slots, data, Kbb_inv, E):  # noqa: ANN001, ANN202
     """Condensed element matrices (the 9 external DOFs, the 2 bubble components condensed)
-    added into ``data`` at ``slots`` (per element, the 9 x 9 positions in the CSR data);
+    added into ``data`` at ``slots`` (per element, the 9 x 9 positions in the CSR data,
+    -1 for a pair left out of the pattern);
     ``E = -K_bb^-1 K_be`` and ``K_bb^-1`` per element. Returns the number of elements with
     a singular bubble block."""
     K = np.empty((11, 11))
@@ -175,7 +176,8 @@ def _tangent(verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, slots, data, Kbb_i
                 E[e, i, m] = -(Kbb_inv[e, i, 0] * K[9, m] + Kbb_inv[e, i, 1] * K[10, m])
         for m in range(9):
             for n in range(9):
-                data[slots[e, m, n]] += K[m, n] + K[m, 9] * E[e, 0, n] + K[m, 10] * E[e, 1, n]
+                if slots[e, m, n] >= 0:
+                    data[slots[e, m, n]] += K[m, n] + K[m, 9] * E[e, 0, n] + K[m, 10] * E[e, 1, n]
     return bad
 
 
@@ -195,13 +197,17 @@ def _element_systems(elements, verts, G, Wq, L, x, nH1, nv, zoff, c1, c2, Js_t, 
 
 @numba.njit(cache=True)
 def _slots(ext, indptr, indices):  # noqa: ANN001, ANN202
-    """Position in the CSR data of every element's DOF pair ``(ext[e, m], ext[e, n])``."""
+    """Position in the CSR data of every element's DOF pair ``(ext[e, m], ext[e, n])``
+    (-1 where either is left out, -1)."""
     ne, k = ext.shape
     out = np.empty((ne, k, k), dtype=np.int64)
     for e in range(ne):
         for m in range(k):
             row = ext[e, m]
             for n in range(k):
+                if row < 0 or ext[e, n] < 0:
+                    out[e, m, n] = -1
+                    continue
                 lo, hi = indptr[row], indptr[row + 1]
                 while lo < hi:  # bisection in the row's sorted columns
                     mid = (lo + hi) // 2
@@ -220,7 +226,7 @@ class PlaneMiniTangent(MiniTangent):
 
     ngsolve_order = NGSOLVE_ORDER
 
-    def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
+    def __init__(self, form, free: np.ndarray | None = None) -> None:  # noqa: ANN001
         mesh, fes = form.mesh, form.fes
         self._element_data(form)
         nv, ne = mesh.nv, mesh.ne
@@ -233,8 +239,9 @@ class PlaneMiniTangent(MiniTangent):
         self.ext_dofs = np.concatenate(
             [(np.arange(2)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 6),
              self.zoff[:, None] + self.verts], axis=1)
-        self._pattern = element_pattern(self.ext_dofs, self.ndof)
-        self._slots = _slots(self.ext_dofs, self._pattern.indptr, self._pattern.indices)
+        rows = numbering(self.ndof, free)[self.ext_dofs]  # -1: a DOF left out
+        self._pattern = element_pattern(rows, self.ndof if free is None else len(free))
+        self._slots = _slots(rows, self._pattern.indptr, self._pattern.indices)
 
     def _check_dofs(self, fes: ngs.FESpace) -> None:
         """The DOF numbers assumed by the kernels against NGSolve's, for a few elements."""
@@ -255,7 +262,8 @@ class PlaneMiniTangent(MiniTangent):
         return R
 
     def assemble(self, x: np.ndarray) -> sp.csr_matrix:
-        """The condensed tangent at the state ``x`` (full DOF vector) [force/length]."""
+        """The condensed tangent at the state ``x`` (full DOF vector) [force/length], on
+        all DOFs or on the ``free`` ones given at set-up."""
         P = self._pattern
         data = np.zeros(P.nnz)
         bad = _tangent(self.verts, self.G, self.Wq, self.L, np.asarray(x), self.nH1, self.nv,
@@ -263,7 +271,7 @@ class PlaneMiniTangent(MiniTangent):
                        self.Kbb_inv, self.E)
         if bad:
             data[:] = np.nan
-        return sp.csr_matrix((data, P.indices, P.indptr), shape=P.shape)
+        return P.matrix(data)
 
     def _element_systems(self, elements: np.ndarray, x: np.ndarray, tangent: bool,
                          K: np.ndarray, r: np.ndarray) -> None:

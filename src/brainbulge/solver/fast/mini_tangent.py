@@ -23,7 +23,7 @@ import scipy.sparse as sp
 
 from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
 from brainbulge.materials.mooney_rivlin import MooneyRivlin
-from brainbulge.solver.fast.element_graph import colour_elements, element_pattern
+from brainbulge.solver.fast.element_graph import colour_elements, element_pattern, numbering
 from brainbulge.solver.fast.mini_kernels import (
     QUAD_POINTS,
     _assemble,
@@ -43,16 +43,20 @@ class MiniTangent:
 
     :meth:`assemble` returns the tangent over all DOFs in NGSolve's sparsity pattern (as
     ``form.a.AssembleLinearization`` followed by ``form.a.mat``, the same numbers to
-    round-off); :meth:`extend_trans`, :meth:`extend` and :meth:`inner_solve` act as
+    round-off), or, given ``free`` (ascending DOF numbers), straight on those DOFs: the
+    rows and columns of the others are left out of the pattern when it is built, so
+    Newton holds one tangent-sized matrix and no gather of its free part.
+    :meth:`extend_trans`, :meth:`extend` and :meth:`inner_solve` act as
     ``form.a.harmonic_extension_trans``, ``harmonic_extension`` and ``inner_solve``
-    for that tangent.
+    for that tangent (on vectors over all DOFs).
     """
 
     #: the local DOF (``3 a + i``, pressures ``12 + c``, bubble ``16 + i``) of each of
     #: NGSolve's element DOFs (x: 4 vertices and the bubble, y, z, 4 pressures)
     ngsolve_order = np.array([0, 3, 6, 9, 16, 1, 4, 7, 10, 17, 2, 5, 8, 11, 18, 12, 13, 14, 15])
 
-    def __init__(self, form) -> None:  # noqa: ANN001 - MixedForm (import cycle)
+    def __init__(self, form, free: np.ndarray | None = None) -> None:  # noqa: ANN001
+        # (form: a MixedForm, not imported: an import cycle)
         t0 = time.perf_counter()
         mesh, fes = form.mesh, form.fes
         self._element_data(form)
@@ -73,7 +77,9 @@ class MiniTangent:
         self.ext_dofs = np.concatenate(
             [(np.arange(3)[None, None, :] * self.nH1 + self.verts[:, :, None]).reshape(ne, 12),
              self.zoff[:, None] + self.verts], axis=1)
-        self._pattern = element_pattern(self.ext_dofs, self.ndof)
+        self._rows = numbering(self.ndof, free)  # each DOF's row in the tangent, -1: none
+        self._pattern = element_pattern(self._rows[self.ext_dofs],
+                                        self.ndof if free is None else len(free))
         numba.set_num_threads(min(available_cores(), numba.config.NUMBA_NUM_THREADS))
         log.info("closed-form MINI tangent: %d elements in %d colours, pattern %d non-zeros "
                  "(%.1f s)", ne, n_col, self._pattern.nnz, time.perf_counter() - t0)
@@ -112,16 +118,17 @@ class MiniTangent:
                 raise ValueError(f"unexpected DOF numbering of element {e}: {dofs}")
 
     def assemble(self, x: np.ndarray) -> sp.csr_matrix:
-        """The condensed tangent at the state ``x`` (full DOF vector) [force/length]."""
+        """The condensed tangent at the state ``x`` (full DOF vector) [force/length], on
+        all DOFs or on the ``free`` ones given at set-up."""
         P = self._pattern
         data = np.zeros(P.nnz)
         bad = _assemble(self.order, self.chunks, self.verts, self.coords, np.asarray(x),
                         self.nH1, self.nv, self.zoff, self.c1, self.c2, self.cb, QUAD_POINTS,
-                        P.indptr, P.indices, data, self.Kbb_inv, self.E)
+                        self._rows, P.indptr, P.indices, data, self.Kbb_inv, self.E)
         if bad:  # as NGSolve's tangent of such a state: not finite, Newton rejects it
             log.warning("%d degenerate elements in the tangent", bad)
             data[:] = np.nan
-        return sp.csr_matrix((data, P.indices, P.indptr), shape=P.shape)
+        return P.matrix(data)
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """``R(x)`` over all DOFs at the form's current load (NaN where an element folds,
