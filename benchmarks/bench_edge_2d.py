@@ -168,7 +168,10 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         steps: int, trust: float, element: str = "mini", max_iterations: int = 20,
         line_search: bool = True, rounding: str = "turned", hc_ratio: float = 3.0,
         law: str = "multipliers", kappa: float = 1e7, trust_max: float = 0.0,
-        onset: float = 0.0) -> dict:
+        onset: float = 0.0, trace: bool = False, frozen: bool = False,
+        inter_tol: float = 1e-6, ramp: str = "fixed", slide: float = 1.0,
+        dt0: float = 0.05, predictor: str = "secant", cap_mode: str = "global",
+        finite_backtrack: bool = False) -> dict:
     import ngsolve as ngs
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
@@ -203,8 +206,15 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     if law == "penalty":
         # kappa/2 max(-g, 0)^2 over the material arc, at 5 Gauss points per edge for P2
         u = form.fes.TrialFunction()[0]
-        x = ngs.CF((ngs.x + u[0], ngs.y + u[1]))
-        g = skull.gap(x)
+        if frozen:  # the gap linearised at the current state: no curvature in the tangent
+            gu = form.gfu.components[0]  # the state Newton works on (x is gfu.vec)
+            xk = ngs.CF((ngs.x + gu[0], ngs.y + gu[1]))
+            eps = 1e-6
+            nk = [(skull.gap(xk + eps * ngs.CF(ei)) - skull.gap(xk - eps * ngs.CF(ei)))
+                  / (2 * eps) for ei in ((1, 0), (0, 1))]
+            g = skull.gap(xk) + nk[0] * (u[0] - gu[0]) + nk[1] * (u[1] - gu[1])
+        else:
+            g = skull.gap(ngs.CF((ngs.x + u[0], ngs.y + u[1])))
         s = ngs.IfPos(-g, -g, 0)  # penetration
         if onset > 0:  # C2: cubic up to the onset depth, then the quadratic
             e = ngs.IfPos(s - onset, 0.5 * kappa * (s * s - onset * s + onset**2 / 3),
@@ -212,8 +222,12 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         else:
             e = 0.5 * kappa * s * s
         form.a += ngs.Variation(e * ngs.ds("skull|opening", bonus_intorder=5))
+        # the penalty's Gauss points (order 9 on a segment: the 5 points of the integral)
+        gp = m.MapToAllElements(ngs.IntegrationRule(ngs.SEGM, 9), m.Boundaries("skull|opening"))
+        gu = form.gfu.components[0]
+        pen_cf = ngs.IfPos(-skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1]))), 1.0, 0.0)
     opt = SolverOptions(steps=steps, hotspot_relaxation=False, max_iterations=max_iterations,
-                        closed_form=law != "penalty")
+                        closed_form=law != "penalty", intermediate_tolerance=inter_tol)
     solver = NewtonSolver(form, opt)
 
     # the trust region: scale each Newton update so that no vertex moves more than
@@ -230,32 +244,97 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     V = form.fes.components[0]
     vd = vertex_dofs(V, m) + form.fes.Range(0).start
     limited = [0]
+    dof_factor_map = (None, None)
+    if cap_mode == "local":  # (element, DOF) pairs: a DOF's factor is its elements' least
+        pe, pd = [], []
+        for k, el in enumerate(m.Elements(ngs.VOL)):
+            dn = [d for d in form.fes.GetDofNrs(el) if d >= 0]
+            pe += [k] * len(dn)
+            pd += dn
+        dof_factor_map = (np.array(pe), np.array(pd))
+    # the trace: per Newton iteration (load, cap factor, |R| after, penetrating Gauss
+    # points, how many entered / left the penetrating set)
+    its_log: list[tuple] = []
+    last_set = [None]
+
+    def record(self, f, trial):
+        if not trace:
+            return
+        n_in = n_out = n_act = -1
+        if law == "penalty":
+            act = np.asarray(pen_cf(gp)).ravel() > 0.5
+            n_act = int(act.sum())
+            if last_set[0] is not None:
+                n_in = int((act & ~last_set[0]).sum())
+                n_out = int((~act & last_set[0]).sum())
+            last_set[0] = act
+        its_log.append((float(form.load.Get()), f, trial, n_act, n_in, n_out))
     radius = [trust]  # the trust region's radius, in local edge lengths
     original = newton_mod.Newton._line_search
 
     def capped(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened):
+        f = 1.0
         if trust > 0:
             d = dx.FV().NumPy()[vd]
             move = np.linalg.norm(d, axis=1) / hv
-            f = radius[0] / max(move.max(), 1e-300)
-            if f < 1:
+            f = min(radius[0] / max(move.max(), 1e-300), 1.0)
+            if f < 1 and trace:
+                iv = int(np.argmax(move))
+                p = X[iv]
+                print(f"  load {float(form.load.Get()):.4f} cap {f:.2f} at r {np.hypot(*p):.4f} theta "
+                      f"{np.degrees(np.arctan2(p[1], p[0])):.2f} hv {hv[iv]:.4f} "
+                      f"moves {np.linalg.norm(d[iv]):.2e}", file=sys.stderr)
+            if f < 1 and cap_mode == "local":  # each element's DOFs by its vertices' cap
+                limited[0] += 1
+                fv = np.minimum(radius[0] / np.maximum(move, 1e-300), 1.0)
+                fd = np.ones(form.fes.ndof)
+                np.minimum.at(fd, dof_factor_map[1], fv[els].min(axis=1)[dof_factor_map[0]])
+                dx.FV().NumPy()[:] *= fd
+                f = float(fv.min())
+            elif f < 1:
                 limited[0] += 1
                 dx.data = f * dx
                 dlams = [f * dl for dl in dlams]
         if not line_search:  # the capped step is taken whatever the residual does
-            x.data = x0 - dx
-            for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
-                pc.lam = l0 - dl
-            trial = self.scaled_norm(self.residual(x))
+            sc = 1.0
+            while True:  # halved only while the trial state is not finite (inverted)
+                x.data = x0 - sc * dx
+                for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
+                    pc.lam = l0 - sc * dl
+                trial = self.scaled_norm(self.residual(x))
+                if np.isfinite(trial) or not finite_backtrack or sc < 1 / 64:
+                    break
+                sc *= 0.5
+            f *= sc
+            record(self, f, trial)
             if trust_max > trust:  # the radius grows while the residual falls
                 radius[0] = (min(2 * radius[0], trust_max) if trial < norm
                              else max(radius[0] / 2, trust))
             return 1.0, trial, tightened
-        return original(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened)
+        out = original(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened)
+        record(self, f * (out[0] or 0.0), out[1])
+        return out
 
     newton_mod.Newton._line_search = capped
     t0 = time.perf_counter()
-    sol = solver.solve()
+    if ramp == "slide":  # increments sized by the slide near the edge (edge2d_ramp)
+        from types import SimpleNamespace
+
+        from edge2d_ramp import ramp as slide_ramp
+
+        th = np.degrees(np.arctan2(X[:, 1], X[:, 0]))
+        r = np.hypot(X[:, 0], X[:, 1])
+        near = (r > R - 1e-6) & (np.min([np.abs(th - (90 + sg * beta / 2))
+                                         for sg in (-1, 1)], axis=0) < 10)
+        form.set_load(0.0)
+        rr = slide_ramp(solver, form, boundary_dofs=vd[near], dt0=dt0, target=slide * hc,
+                        predictor=predictor, inter_tol=inter_tol, final_tol=opt.tolerance,
+                        verbose=trace)
+        sol = SimpleNamespace(converged=rr["converged"], load=rr["load"],
+                              newton_iterations=rr["newton_all"], rejected_steps=rr["rejected"],
+                              describe=lambda: "", accepted=rr["accepted"])
+    else:
+        sol = solver.solve()
     wall = time.perf_counter() - t0
 
     u = form.output_displacement() if hasattr(form, "output_displacement") else form.u
@@ -282,19 +361,42 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     skull_side = np.abs(theta_ref - 90) >= beta / 2
     slide = float(np.max(np.abs(theta_def - theta_ref)[skull_side]))
     g_sharp = region_gap(R, beta, 90.0, xP)[0]
+    if trace:
+        print_trace(its_log, solver.history)
     uL = form.output_displacement() if hasattr(form, "output_displacement") else form.u
     JL = ngs.Det(ngs.Id(2) + ngs.Grad(uL))
     Jmin = float(np.min(JL(m.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 2), ngs.VOL))))
     return {"alpha": alpha, "beta": beta, "contact": contact, "rho": rho, "h": h,
             "half": half, "steps": steps, "trust": trust, "element": element,
             "converged": sol.converged, "load": round(sol.load, 4),
-            "newton": sol.newton_iterations, "rejected": sol.rejected_steps,
+            "newton": sol.newton_iterations,
+            "newton_all": sum(len(h) - 1 for h in solver.history), "rejected": sol.rejected_steps,
             "limited": limited[0], "wall_s": round(wall, 1), "top_uy": top,
             "crossing_round": float(max(-g_round.min(), 0)),
             "crossing_sharp": float(max(-g_sharp.min(), 0)), "Jmin": Jmin,
             "slide_deg": slide, "worst_ref_deg": float(theta_ref[i_worst]),
             "worst_def_deg": float(theta_def[i_worst]),
             "ndof": form.fes.ndof, "reason": sol.describe()[:160]}
+
+
+def print_trace(its_log: list[tuple], history: list[list[float]]) -> None:
+    """Per Newton solve (one load step's attempt), on stderr: load, iterations, capped
+    iterations and their mean cap factor, the residual history, the penetrating Gauss points
+    and how many entered / left the set per iteration."""
+    k = 0
+    for h in history:
+        n = len(h) - 1
+        rows = its_log[k:k + n]
+        k += n
+        if not rows:
+            print(f"solve: 0 its |R| {h[0]:.1e}", file=sys.stderr)
+            continue
+        capped = [r[1] for r in rows if r[1] < 1]
+        res = " ".join(f"{v:.0e}" for v in h)
+        churn = " ".join(f"{r[3]}+{r[4]}-{r[5]}" for r in rows)
+        print(f"load {rows[0][0]:.4f}: {n} its, capped {len(capped)}"
+              f" (f {np.mean(capped) if capped else 1:.2f}) |R| {res} | set {churn}",
+              file=sys.stderr)
 
 
 def main() -> None:
@@ -317,6 +419,26 @@ def main() -> None:
     ap.add_argument("--kappa", type=float, default=1e7, help="penalty [stress/length]")
     ap.add_argument("--onset", type=float, default=0.0,
                     help="the penalty's cubic onset depth [R] (C2 law; 0: quadratic)")
+    ap.add_argument("--frozen", action="store_true",
+                    help="penalty: the gap linearised at the current state (no curvature "
+                    "term in the tangent)")
+    ap.add_argument("--inter-tol", type=float, default=1e-6,
+                    help="Newton's tolerance below full load (the last step: 1e-9)")
+    ap.add_argument("--ramp", default="fixed", choices=("fixed", "slide"),
+                    help="fixed: the product's ramp (--steps); slide: increments sized by the "
+                    "slide near the edge (benchmarks/edge2d_ramp.py)")
+    ap.add_argument("--slide", type=float, default=1.0,
+                    help="--ramp slide: the target slide per step, in edge mesh sizes")
+    ap.add_argument("--dt0", type=float, default=0.05, help="--ramp slide: first increment")
+    ap.add_argument("--predictor", default="secant", choices=("secant", "none"))
+    ap.add_argument("--cap-mode", default="global", choices=("global", "local"),
+                    help="global: the whole update scaled; local: each element's DOFs by "
+                    "the least factor of its vertices")
+    ap.add_argument("--finite", action="store_true",
+                    help="without the line search: halve a step while its residual is not "
+                    "finite (an inverted element)")
+    ap.add_argument("--trace", action="store_true",
+                    help="per load step on stderr: iterations, caps, |R|, set changes")
     ap.add_argument("--table", action="store_true", help="every row of TABLE")
     a = ap.parse_args()
     if not a.table:
@@ -324,7 +446,10 @@ def main() -> None:
                              a.trust, a.element,
                              line_search=not a.no_line_search, rounding=a.rounding,
                              hc_ratio=a.hc_ratio, law=a.law, kappa=a.kappa,
-                             trust_max=a.trust_max, onset=a.onset)))
+                             trust_max=a.trust_max, onset=a.onset, trace=a.trace,
+                             frozen=a.frozen, inter_tol=a.inter_tol, ramp=a.ramp,
+                             slide=a.slide, dt0=a.dt0, predictor=a.predictor,
+                             cap_mode=a.cap_mode, finite_backtrack=a.finite)))
         return
     keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
             "steps", "trust", "line_search", "rounding")
