@@ -171,7 +171,8 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         onset: float = 0.0, trace: bool = False, frozen: bool = False,
         inter_tol: float = 1e-6, ramp: str = "fixed", slide: float = 1.0,
         dt0: float = 0.05, predictor: str = "secant", cap_mode: str = "global",
-        finite_backtrack: bool = False) -> dict:
+        finite_backtrack: bool = False, soc: bool = False, jcap: float = 0.0,
+        al_tol: float = 2e-4, al_passes: int = 6) -> dict:
     import ngsolve as ngs
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
@@ -192,17 +193,42 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     mat = preset("paper")["gray"]
     materials = {r: mat for r in set(m.GetMaterials())}
     sym = {0: "symmetry"} if half else {}
-    if contact == "sliding" and law == "penalty":  # the contact is in the energy, below
+    if contact == "sliding" and law != "multipliers":  # the contact is in the energy
         problem = Problem(m, materials, {"swelling": 1.2}, clamped="base",
                           clamped_components=sym)
     elif contact == "sliding":
         problem = Problem(m, materials, {"swelling": 1.2}, clamped="base",
                           clamped_components=sym,
                           contacts=[Contact("skull|opening", skull)])
-    else:
+    else:  # noslip: the skull's arc clamped, the opening in contact (the energy's, or here)
         problem = Problem(m, materials, {"swelling": 1.2}, clamped="base|skull",
-                          clamped_components=sym, contacts=[Contact("opening", skull)])
+                          clamped_components=sym,
+                          contacts=[Contact("opening", skull)] if law == "multipliers" else [])
     form = MixedForm(problem, element=element)
+    al = None
+    if law == "augmented":  # (1/2 kappa) max(lam + kappa s, 0)^2, lam per Gauss point
+        ir = ngs.IntegrationRule(ngs.SEGM, 9)
+        dsg = ngs.ds("skull|opening", intrules={ngs.SEGM: ir})
+        L = ngs.SurfaceL2(m, order=4, definedon=m.Boundaries("skull|opening"))
+        lam = ngs.GridFunction(L)
+        lu, lv = L.TnT()
+        Minv = ngs.BilinearForm(lu * lv * dsg).Assemble().mat.Inverse(
+            L.FreeDofs(), inverse="sparsecholesky")
+        u = form.fes.TrialFunction()[0]
+        s = -skull.gap(ngs.CF((ngs.x + u[0], ngs.y + u[1])))
+        q = lam + kappa * s
+        form.a += ngs.Variation(ngs.IfPos(q, q * q, 0) / (2 * kappa) * dsg)
+        gu = form.gfu.components[0]
+        q_state = lam - kappa * skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1])))
+        gp = m.MapToAllElements(ir, m.Boundaries("skull|opening"))
+        pen_cf = ngs.IfPos(q_state, 1.0, 0.0)
+        pen_depth = -skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1])))
+
+        def al_update() -> None:
+            f = ngs.LinearForm(ngs.IfPos(q_state, q_state, 0) * lv * dsg).Assemble()
+            lam.vec.data = Minv * f.vec
+
+        al = (al_update, lambda: float(np.max(np.asarray(pen_depth(gp)))))
     if law == "penalty":
         # kappa/2 max(-g, 0)^2 over the material arc, at 5 Gauss points per edge for P2
         u = form.fes.TrialFunction()[0]
@@ -227,7 +253,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         gu = form.gfu.components[0]
         pen_cf = ngs.IfPos(-skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1]))), 1.0, 0.0)
     opt = SolverOptions(steps=steps, hotspot_relaxation=False, max_iterations=max_iterations,
-                        closed_form=law != "penalty", intermediate_tolerance=inter_tol)
+                        closed_form=law == "multipliers", intermediate_tolerance=inter_tol)
     solver = NewtonSolver(form, opt)
 
     # the trust region: scale each Newton update so that no vertex moves more than
@@ -261,7 +287,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         if not trace:
             return
         n_in = n_out = n_act = -1
-        if law == "penalty":
+        if law != "multipliers":
             act = np.asarray(pen_cf(gp)).ravel() > 0.5
             n_act = int(act.sum())
             if last_set[0] is not None:
@@ -274,33 +300,38 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
 
     def capped(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened):
         f = 1.0
+        if jcap > 0:  # the largest step keeping J >= jcap J(x0) at the integration points
+            f = j_step(dx)
         if trust > 0:
             d = dx.FV().NumPy()[vd]
             move = np.linalg.norm(d, axis=1) / hv
-            f = min(radius[0] / max(move.max(), 1e-300), 1.0)
-            if f < 1 and trace:
+            fm = radius[0] / max(move.max(), 1e-300)
+            if fm < 1 and trace:
                 iv = int(np.argmax(move))
                 p = X[iv]
-                print(f"  load {float(form.load.Get()):.4f} cap {f:.2f} at r {np.hypot(*p):.4f} theta "
-                      f"{np.degrees(np.arctan2(p[1], p[0])):.2f} hv {hv[iv]:.4f} "
-                      f"moves {np.linalg.norm(d[iv]):.2e}", file=sys.stderr)
-            if f < 1 and cap_mode == "local":  # each element's DOFs by its vertices' cap
-                limited[0] += 1
+                print(f"  load {float(form.load.Get()):.4f} cap {fm:.2f} at r "
+                      f"{np.hypot(*p):.4f} theta {np.degrees(np.arctan2(p[1], p[0])):.2f} "
+                      f"hv {hv[iv]:.4f} moves {np.linalg.norm(d[iv]):.2e}", file=sys.stderr)
+            if fm < 1 and cap_mode == "local":  # each element's DOFs by its vertices' cap
                 fv = np.minimum(radius[0] / np.maximum(move, 1e-300), 1.0)
                 fd = np.ones(form.fes.ndof)
                 np.minimum.at(fd, dof_factor_map[1], fv[els].min(axis=1)[dof_factor_map[0]])
                 dx.FV().NumPy()[:] *= fd
-                f = float(fv.min())
-            elif f < 1:
                 limited[0] += 1
-                dx.data = f * dx
-                dlams = [f * dl for dl in dlams]
+            else:
+                f = min(f, fm)
+        if f < 1:
+            limited[0] += 1
+            dx.data = f * dx
+            dlams = [f * dl for dl in dlams]
         if not line_search:  # the capped step is taken whatever the residual does
             sc = 1.0
             while True:  # halved only while the trial state is not finite (inverted)
                 x.data = x0 - sc * dx
                 for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
                     pc.lam = l0 - sc * dl
+                if soc:
+                    second_order_correction(x0, x)
                 trial = self.scaled_norm(self.residual(x))
                 if np.isfinite(trial) or not finite_backtrack or sc < 1 / 64:
                     break
@@ -315,6 +346,48 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         record(self, f * (out[0] or 0.0), out[1])
         return out
 
+    # the step bound by J: det(F - f G) = jcap det F at the first such f > 0
+    gdu = ngs.GridFunction(V)
+    urange = form.fes.Range(0)
+    jpts = m.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 4), ngs.VOL)
+    uF = form.gfu.components[0]
+
+    def j_step(dx) -> float:
+        gdu.vec.FV().NumPy()[:] = dx.FV().NumPy()[urange.start:urange.stop]
+        G = np.asarray(ngs.Grad(gdu)(jpts)).reshape(-1, 2, 2)
+        F = np.asarray(ngs.Grad(uF)(jpts)).reshape(-1, 2, 2) + np.eye(2)
+        detF = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+        a = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
+        b = -(F[:, 1, 1] * G[:, 0, 0] + F[:, 0, 0] * G[:, 1, 1]
+              - F[:, 0, 1] * G[:, 1, 0] - F[:, 1, 0] * G[:, 0, 1])
+        c = (1 - jcap) * detF
+        with np.errstate(invalid="ignore", divide="ignore"):
+            disc = np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))
+            roots = np.stack([(-b - disc) / (2 * a), (-b + disc) / (2 * a),
+                              np.where(b != 0, -c / b, np.inf)])
+        roots[:, (b * b - 4 * a * c) < 0] = np.inf
+        roots[2, np.abs(a) > 1e-14] = np.inf
+        roots[:2, np.abs(a) <= 1e-14] = np.inf
+        roots[roots <= 0] = np.inf
+        return float(min(roots.min(), 1.0))
+
+    # the boundary vertices in contact with the skull (the second-order correction's)
+    bnames = m.GetBoundaries()
+    bverts = np.unique([v.nr for el in m.Elements(ngs.BND)
+                        if bnames[el.index] in ("skull", "opening") for v in el.vertices])
+    vd_b = vd[bverts]
+
+    def second_order_correction(x0, x):
+        """Move each penetrating boundary vertex along the skull's normal by what the gap's
+        curvature added over the linear prediction (the Maratos effect's correction)."""
+        a0, a1 = x0.FV().NumPy(), x.FV().NumPy()
+        p0, p1 = X[bverts] + a0[vd_b], X[bverts] + a1[vd_b]
+        g0, n0 = skull.gap_and_normal(p0)
+        g1, n1 = skull.gap_and_normal(p1)
+        glin = g0 + np.einsum("ij,ij->i", n0, p1 - p0)
+        c = np.where(g1 < 0, np.maximum(glin - g1, 0.0), 0.0)
+        a1[vd_b] += c[:, None] * n1
+
     newton_mod.Newton._line_search = capped
     t0 = time.perf_counter()
     if ramp == "slide":  # increments sized by the slide near the edge (edge2d_ramp)
@@ -327,9 +400,26 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         near = (r > R - 1e-6) & (np.min([np.abs(th - (90 + sg * beta / 2))
                                          for sg in (-1, 1)], axis=0) < 10)
         form.set_load(0.0)
+        after = finish = None
+        if al is not None:
+            def after(x, t):  # the multipliers follow each converged step
+                al[0]()
+                return 0
+
+            def finish(x):  # Uzawa at full load until the Gauss points' depth is al_tol
+                its_all = 0
+                for _ in range(al_passes):
+                    if al[1]() <= al_tol:
+                        return its_all, True
+                    al[0]()
+                    ok, its, _ = solver.newton(x, opt.tolerance)
+                    its_all += its
+                    if not ok:
+                        return its_all, False
+                return its_all, al[1]() <= al_tol
         rr = slide_ramp(solver, form, boundary_dofs=vd[near], dt0=dt0, target=slide * hc,
                         predictor=predictor, inter_tol=inter_tol, final_tol=opt.tolerance,
-                        verbose=trace)
+                        after_step=after, finish=finish, verbose=trace)
         sol = SimpleNamespace(converged=rr["converged"], load=rr["load"],
                               newton_iterations=rr["newton_all"], rejected_steps=rr["rejected"],
                               describe=lambda: "", accepted=rr["accepted"])
@@ -415,7 +505,11 @@ def main() -> None:
     ap.add_argument("--hc-ratio", type=float, default=3.0, help="rho / edge mesh size")
     ap.add_argument("--trust-max", type=float, default=0.0,
                     help="the trust radius doubles while the residual falls, up to this")
-    ap.add_argument("--law", default="multipliers", choices=("multipliers", "penalty"))
+    ap.add_argument("--law", default="multipliers",
+                    choices=("multipliers", "penalty", "augmented"))
+    ap.add_argument("--al-tol", type=float, default=2e-4,
+                    help="augmented: Uzawa passes at full load until no Gauss point is "
+                    "deeper than this [R]")
     ap.add_argument("--kappa", type=float, default=1e7, help="penalty [stress/length]")
     ap.add_argument("--onset", type=float, default=0.0,
                     help="the penalty's cubic onset depth [R] (C2 law; 0: quadratic)")
@@ -437,6 +531,12 @@ def main() -> None:
     ap.add_argument("--finite", action="store_true",
                     help="without the line search: halve a step while its residual is not "
                     "finite (an inverted element)")
+    ap.add_argument("--soc", action="store_true",
+                    help="without the line search: a second-order correction of each update "
+                    "(penetrating boundary vertices moved back by the gap's curvature term)")
+    ap.add_argument("--jcap", type=float, default=0.0,
+                    help="a step bound by the volume ratio: no update takes J below this "
+                    "fraction of its value at any integration point (0: off)")
     ap.add_argument("--trace", action="store_true",
                     help="per load step on stderr: iterations, caps, |R|, set changes")
     ap.add_argument("--table", action="store_true", help="every row of TABLE")
@@ -449,7 +549,8 @@ def main() -> None:
                              trust_max=a.trust_max, onset=a.onset, trace=a.trace,
                              frozen=a.frozen, inter_tol=a.inter_tol, ramp=a.ramp,
                              slide=a.slide, dt0=a.dt0, predictor=a.predictor,
-                             cap_mode=a.cap_mode, finite_backtrack=a.finite)))
+                             cap_mode=a.cap_mode, finite_backtrack=a.finite, soc=a.soc,
+                             jcap=a.jcap, al_tol=a.al_tol)))
         return
     keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
             "steps", "trust", "line_search", "rounding")

@@ -22,11 +22,12 @@ import numpy as np
 def ramp(solver, form, *, boundary_dofs: np.ndarray, dt0: float, target: float,
          predictor: str = "secant", inter_tol: float = 1e-6, final_tol: float = 1e-9,
          grow: float = 2.0, dt_max: float = 1.0, dt_min: float = 1e-3, budget: int = 10**9,
-         after_step=None, verbose: bool = False) -> dict:
+         after_step=None, finish=None, verbose: bool = False) -> dict:
     """Ramp ``form``'s load to 1 with ``solver`` (a :class:`NewtonSolver`); ``boundary_dofs``
     (k, 2): the displacement DOFs of the vertices whose slide sizes the increments;
     ``after_step(x, t)``: called after each accepted step below full load (e.g. a multiplier
-    update; returns the number of extra Newton iterations it spent). Returns the load
+    update; returns the number of extra Newton iterations it spent); ``finish(x)``: called
+    at full load, returns its Newton iterations and whether it converged. Returns the load
     reached, all Newton iterations, accepted / rejected steps and the per-step record."""
     x = form.gfu.vec
     x_prev = x.CreateVector()
@@ -72,6 +73,12 @@ def ramp(solver, form, *, boundary_dofs: np.ndarray, dt0: float, target: float,
         dt = dt * float(np.clip(target / max(slide, 1e-300), 0.5, grow))
     x.data = x_prev
     form.load.Set(t)
+    ok = t >= 1 - 1e-12
+    if ok and finish is not None:
+        extra, ok = finish(x)
+        total += extra
+        if verbose:
+            print(f"  finish: {extra} its, converged {ok}", file=sys.stderr)
     return {"load": t, "newton_all": total, "accepted": len(steps), "rejected": rejected,
-            "converged": t >= 1 - 1e-12, "steps": steps,
+            "converged": ok, "steps": steps,
             "wall_ramp_s": time.perf_counter() - start}
