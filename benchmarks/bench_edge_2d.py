@@ -172,7 +172,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         inter_tol: float = 1e-6, ramp: str = "fixed", slide: float = 1.0,
         dt0: float = 0.05, predictor: str = "secant", cap_mode: str = "global",
         finite_backtrack: bool = False, soc: bool = False, jcap: float = 0.0,
-        al_tol: float = 2e-4, al_passes: int = 6) -> dict:
+        al_tol: float = 2e-4, al_passes: int = 6, budget: int = 400) -> dict:
     import ngsolve as ngs
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
@@ -419,7 +419,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
                 return its_all, al[1]() <= al_tol
         rr = slide_ramp(solver, form, boundary_dofs=vd[near], dt0=dt0, target=slide * hc,
                         predictor=predictor, inter_tol=inter_tol, final_tol=opt.tolerance,
-                        after_step=after, finish=finish, verbose=trace)
+                        after_step=after, finish=finish, verbose=trace, budget=budget)
         sol = SimpleNamespace(converged=rr["converged"], load=rr["load"],
                               newton_iterations=rr["newton_all"], rejected_steps=rr["rejected"],
                               describe=lambda: "", accepted=rr["accepted"])
@@ -452,6 +452,8 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     slide = float(np.max(np.abs(theta_def - theta_ref)[skull_side]))
     g_sharp = region_gap(R, beta, 90.0, xP)[0]
     if trace:
+        from edge2d_report import print_trace
+
         print_trace(its_log, solver.history)
     uL = form.output_displacement() if hasattr(form, "output_displacement") else form.u
     JL = ngs.Det(ngs.Id(2) + ngs.Grad(uL))
@@ -467,26 +469,6 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             "slide_deg": slide, "worst_ref_deg": float(theta_ref[i_worst]),
             "worst_def_deg": float(theta_def[i_worst]),
             "ndof": form.fes.ndof, "reason": sol.describe()[:160]}
-
-
-def print_trace(its_log: list[tuple], history: list[list[float]]) -> None:
-    """Per Newton solve (one load step's attempt), on stderr: load, iterations, capped
-    iterations and their mean cap factor, the residual history, the penetrating Gauss points
-    and how many entered / left the set per iteration."""
-    k = 0
-    for h in history:
-        n = len(h) - 1
-        rows = its_log[k:k + n]
-        k += n
-        if not rows:
-            print(f"solve: 0 its |R| {h[0]:.1e}", file=sys.stderr)
-            continue
-        capped = [r[1] for r in rows if r[1] < 1]
-        res = " ".join(f"{v:.0e}" for v in h)
-        churn = " ".join(f"{r[3]}+{r[4]}-{r[5]}" for r in rows)
-        print(f"load {rows[0][0]:.4f}: {n} its, capped {len(capped)}"
-              f" (f {np.mean(capped) if capped else 1:.2f}) |R| {res} | set {churn}",
-              file=sys.stderr)
 
 
 def main() -> None:
@@ -540,7 +522,17 @@ def main() -> None:
     ap.add_argument("--trace", action="store_true",
                     help="per load step on stderr: iterations, caps, |R|, set changes")
     ap.add_argument("--table", action="store_true", help="every row of TABLE")
+    ap.add_argument("--budget", type=int, default=400,
+                    help="--ramp slide: stop after this many Newton iterations")
+    ap.add_argument("--sweep", action="store_true",
+                    help="the sector study's 32 scenarios (alphas x betas x sliding / "
+                    "noslip) with the other options given, each in its own process")
     a = ap.parse_args()
+    if a.sweep:
+        from edge2d_report import sweep
+
+        sweep(__file__, [arg for arg in sys.argv[1:] if arg != "--sweep"])
+        return
     if not a.table:
         print(json.dumps(run(a.alpha, a.beta, a.contact, a.rho, a.h, not a.full, a.steps,
                              a.trust, a.element,
@@ -550,7 +542,7 @@ def main() -> None:
                              frozen=a.frozen, inter_tol=a.inter_tol, ramp=a.ramp,
                              slide=a.slide, dt0=a.dt0, predictor=a.predictor,
                              cap_mode=a.cap_mode, finite_backtrack=a.finite, soc=a.soc,
-                             jcap=a.jcap, al_tol=a.al_tol)))
+                             jcap=a.jcap, al_tol=a.al_tol, budget=a.budget)))
         return
     keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
             "steps", "trust", "line_search", "rounding")
