@@ -172,7 +172,8 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         inter_tol: float = 1e-6, ramp: str = "fixed", slide: float = 1.0,
         dt0: float = 0.05, predictor: str = "secant", cap_mode: str = "global",
         finite_backtrack: bool = False, soc: bool = False, jcap: float = 0.0,
-        al_tol: float = 2e-4, al_passes: int = 6, budget: int = 400) -> dict:
+        al_tol: float = 2e-4, al_passes: int = 6, budget: int = 400,
+        trust_normal: float = 0.0, cap_near: float = 0.0) -> dict:
     import ngsolve as ngs
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
@@ -270,6 +271,11 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     V = form.fes.components[0]
     vd = vertex_dofs(V, m) + form.fes.Range(0).start
     limited = [0]
+    # the rounding's centres (the end face's side of each edge): the near-edge cap's
+    half_b = math.radians(beta / 2)
+    centres = [(R + rho) * np.array([math.cos(math.pi / 2 + sg * half_b),
+                                     math.sin(math.pi / 2 + sg * half_b)])
+               for sg in ((1,) if half else (1, -1))]
     dof_factor_map = (None, None)
     if cap_mode == "local":  # (element, DOF) pairs: a DOF's factor is its elements' least
         pe, pd = [], []
@@ -305,6 +311,10 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         if trust > 0:
             d = dx.FV().NumPy()[vd]
             move = np.linalg.norm(d, axis=1) / hv
+            if cap_near > 0:  # only the vertices near the rounded edge are capped
+                pos = X + x0.FV().NumPy()[vd]
+                dist = np.min([np.linalg.norm(pos - c, axis=1) for c in centres], axis=0)
+                move = np.where(dist < cap_near * rho, move, 0.0)
             fm = radius[0] / max(move.max(), 1e-300)
             if fm < 1 and trace:
                 iv = int(np.argmax(move))
@@ -320,6 +330,14 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
                 limited[0] += 1
             else:
                 f = min(f, fm)
+        if trust_normal > 0:  # the boundary's moves along the skull's normal, near it
+            a0 = x0.FV().NumPy()
+            p0 = X[bverts] + a0[vd_b]
+            g0, n0 = skull.gap_and_normal(p0)
+            dn = np.abs(np.einsum("ij,ij->i", n0, dx.FV().NumPy()[vd_b]))
+            near_skull = g0 < hv[bverts]
+            fn = trust_normal * hv[bverts] / np.maximum(dn, 1e-300)
+            f = min(f, float(fn[near_skull].min(initial=1.0)))
         if f < 1:
             limited[0] += 1
             dx.data = f * dx
@@ -519,6 +537,12 @@ def main() -> None:
     ap.add_argument("--jcap", type=float, default=0.0,
                     help="a step bound by the volume ratio: no update takes J below this "
                     "fraction of its value at any integration point (0: off)")
+    ap.add_argument("--trust-normal", type=float, default=0.0,
+                    help="an update never moves an arc vertex near the skull along the "
+                    "skull's normal more than this fraction of its smallest edge (0: off)")
+    ap.add_argument("--cap-near", type=float, default=0.0,
+                    help="the --trust cap only for vertices within this many rho of a "
+                    "rounding's centre (0: every vertex)")
     ap.add_argument("--trace", action="store_true",
                     help="per load step on stderr: iterations, caps, |R|, set changes")
     ap.add_argument("--table", action="store_true", help="every row of TABLE")
@@ -542,7 +566,8 @@ def main() -> None:
                              frozen=a.frozen, inter_tol=a.inter_tol, ramp=a.ramp,
                              slide=a.slide, dt0=a.dt0, predictor=a.predictor,
                              cap_mode=a.cap_mode, finite_backtrack=a.finite, soc=a.soc,
-                             jcap=a.jcap, al_tol=a.al_tol, budget=a.budget)))
+                             jcap=a.jcap, al_tol=a.al_tol, budget=a.budget,
+                             trust_normal=a.trust_normal, cap_near=a.cap_near)))
         return
     keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
             "steps", "trust", "line_search", "rounding")
