@@ -27,7 +27,14 @@ before to 8 degrees past the edge), ``--h``, ``--full`` (else the half domain, `
 the symmetry axis), ``--steps`` (equal load steps, grown by the ramp), ``--trust`` (an update
 never moves a vertex more than this fraction of its smallest incident edge; 0: off;
 ``--trust-max``: the radius doubles while the residual falls), ``--no-line-search`` (the
-capped step is taken as it is), ``--element``.
+capped step is taken as it is), ``--element``. The Newton study (docs/design.md): ``--ramp
+slide`` (increments sized by the slide near the edge, :mod:`edge2d_ramp`) with
+``--predictor none``, ``--law augmented`` (the penalty's multipliers on the Gauss points,
+updated after each load step), the step bounds ``--jcap`` (by ``J``), ``--trust-normal``
+(the normal moves near the skull), ``--cap-near`` (the cap near the rounding only),
+``--cap-mode local``, ``--soc`` (a second-order correction), ``--frozen`` (no curvature
+term), ``--finite``, ``--inter-tol``; ``--trace`` and ``--sweep`` (:mod:`edge2d_report`).
+``newton_all`` counts every Newton iteration, failed attempts included.
 
 Rerun: ``python benchmarks/bench_edge_2d.py --table`` (every row, each in its own process;
 about 30 min on 2 cores alone).
