@@ -27,7 +27,14 @@ before to 8 degrees past the edge), ``--h``, ``--full`` (else the half domain, `
 the symmetry axis), ``--steps`` (equal load steps, grown by the ramp), ``--trust`` (an update
 never moves a vertex more than this fraction of its smallest incident edge; 0: off;
 ``--trust-max``: the radius doubles while the residual falls), ``--no-line-search`` (the
-capped step is taken as it is), ``--element``.
+capped step is taken as it is), ``--element``. The Newton study (docs/design.md): ``--ramp
+slide`` (increments sized by the slide near the edge, :mod:`edge2d_ramp`) with
+``--predictor none``, ``--law augmented`` (the penalty's multipliers on the Gauss points,
+updated after each load step), the step bounds ``--jcap`` (by ``J``), ``--trust-normal``
+(the normal moves near the skull), ``--cap-near`` (the cap near the rounding only),
+``--cap-mode local``, ``--soc`` (a second-order correction), ``--frozen`` (no curvature
+term), ``--finite``, ``--inter-tol``; ``--trace`` and ``--sweep`` (:mod:`edge2d_report`).
+``newton_all`` counts every Newton iteration, failed attempts included.
 
 Rerun: ``python benchmarks/bench_edge_2d.py --table`` (every row, each in its own process;
 about 30 min on 2 cores alone).
@@ -168,7 +175,12 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         steps: int, trust: float, element: str = "mini", max_iterations: int = 20,
         line_search: bool = True, rounding: str = "turned", hc_ratio: float = 3.0,
         law: str = "multipliers", kappa: float = 1e7, trust_max: float = 0.0,
-        onset: float = 0.0) -> dict:
+        onset: float = 0.0, trace: bool = False, frozen: bool = False,
+        inter_tol: float = 1e-6, ramp: str = "fixed", slide: float = 1.0,
+        dt0: float = 0.05, predictor: str = "secant", cap_mode: str = "global",
+        finite_backtrack: bool = False, soc: bool = False, jcap: float = 0.0,
+        al_tol: float = 2e-4, al_passes: int = 6, budget: int = 400,
+        trust_normal: float = 0.0, cap_near: float = 0.0) -> dict:
     import ngsolve as ngs
 
     from brainbulge.geometry.ngsolve_arrays import element_vertices, vertex_coordinates
@@ -189,22 +201,54 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     mat = preset("paper")["gray"]
     materials = {r: mat for r in set(m.GetMaterials())}
     sym = {0: "symmetry"} if half else {}
-    if contact == "sliding" and law == "penalty":  # the contact is in the energy, below
+    if contact == "sliding" and law != "multipliers":  # the contact is in the energy
         problem = Problem(m, materials, {"swelling": 1.2}, clamped="base",
                           clamped_components=sym)
     elif contact == "sliding":
         problem = Problem(m, materials, {"swelling": 1.2}, clamped="base",
                           clamped_components=sym,
                           contacts=[Contact("skull|opening", skull)])
-    else:
+    else:  # noslip: the skull's arc clamped, the opening in contact (the energy's, or here)
         problem = Problem(m, materials, {"swelling": 1.2}, clamped="base|skull",
-                          clamped_components=sym, contacts=[Contact("opening", skull)])
+                          clamped_components=sym,
+                          contacts=[Contact("opening", skull)] if law == "multipliers" else [])
     form = MixedForm(problem, element=element)
+    al = None
+    if law == "augmented":  # (1/2 kappa) max(lam + kappa s, 0)^2, lam per Gauss point
+        ir = ngs.IntegrationRule(ngs.SEGM, 9)
+        dsg = ngs.ds("skull|opening", intrules={ngs.SEGM: ir})
+        L = ngs.SurfaceL2(m, order=4, definedon=m.Boundaries("skull|opening"))
+        lam = ngs.GridFunction(L)
+        lu, lv = L.TnT()
+        Minv = ngs.BilinearForm(lu * lv * dsg).Assemble().mat.Inverse(
+            L.FreeDofs(), inverse="sparsecholesky")
+        u = form.fes.TrialFunction()[0]
+        s = -skull.gap(ngs.CF((ngs.x + u[0], ngs.y + u[1])))
+        q = lam + kappa * s
+        form.a += ngs.Variation(ngs.IfPos(q, q * q, 0) / (2 * kappa) * dsg)
+        gu = form.gfu.components[0]
+        q_state = lam - kappa * skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1])))
+        gp = m.MapToAllElements(ir, m.Boundaries("skull|opening"))
+        pen_cf = ngs.IfPos(q_state, 1.0, 0.0)
+        pen_depth = -skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1])))
+
+        def al_update() -> None:
+            f = ngs.LinearForm(ngs.IfPos(q_state, q_state, 0) * lv * dsg).Assemble()
+            lam.vec.data = Minv * f.vec
+
+        al = (al_update, lambda: float(np.max(np.asarray(pen_depth(gp)))))
     if law == "penalty":
         # kappa/2 max(-g, 0)^2 over the material arc, at 5 Gauss points per edge for P2
         u = form.fes.TrialFunction()[0]
-        x = ngs.CF((ngs.x + u[0], ngs.y + u[1]))
-        g = skull.gap(x)
+        if frozen:  # the gap linearised at the current state: no curvature in the tangent
+            gu = form.gfu.components[0]  # the state Newton works on (x is gfu.vec)
+            xk = ngs.CF((ngs.x + gu[0], ngs.y + gu[1]))
+            eps = 1e-6
+            nk = [(skull.gap(xk + eps * ngs.CF(ei)) - skull.gap(xk - eps * ngs.CF(ei)))
+                  / (2 * eps) for ei in ((1, 0), (0, 1))]
+            g = skull.gap(xk) + nk[0] * (u[0] - gu[0]) + nk[1] * (u[1] - gu[1])
+        else:
+            g = skull.gap(ngs.CF((ngs.x + u[0], ngs.y + u[1])))
         s = ngs.IfPos(-g, -g, 0)  # penetration
         if onset > 0:  # C2: cubic up to the onset depth, then the quadratic
             e = ngs.IfPos(s - onset, 0.5 * kappa * (s * s - onset * s + onset**2 / 3),
@@ -212,8 +256,12 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         else:
             e = 0.5 * kappa * s * s
         form.a += ngs.Variation(e * ngs.ds("skull|opening", bonus_intorder=5))
+        # the penalty's Gauss points (order 9 on a segment: the 5 points of the integral)
+        gp = m.MapToAllElements(ngs.IntegrationRule(ngs.SEGM, 9), m.Boundaries("skull|opening"))
+        gu = form.gfu.components[0]
+        pen_cf = ngs.IfPos(-skull.gap(ngs.CF((ngs.x + gu[0], ngs.y + gu[1]))), 1.0, 0.0)
     opt = SolverOptions(steps=steps, hotspot_relaxation=False, max_iterations=max_iterations,
-                        closed_form=law != "penalty")
+                        closed_form=law == "multipliers", intermediate_tolerance=inter_tol)
     solver = NewtonSolver(form, opt)
 
     # the trust region: scale each Newton update so that no vertex moves more than
@@ -230,32 +278,178 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     V = form.fes.components[0]
     vd = vertex_dofs(V, m) + form.fes.Range(0).start
     limited = [0]
+    # the rounding's centres (the end face's side of each edge): the near-edge cap's
+    half_b = math.radians(beta / 2)
+    centres = [(R + rho) * np.array([math.cos(math.pi / 2 + sg * half_b),
+                                     math.sin(math.pi / 2 + sg * half_b)])
+               for sg in ((1,) if half else (1, -1))]
+    dof_factor_map = (None, None)
+    if cap_mode == "local":  # (element, DOF) pairs: a DOF's factor is its elements' least
+        pe, pd = [], []
+        for k, el in enumerate(m.Elements(ngs.VOL)):
+            dn = [d for d in form.fes.GetDofNrs(el) if d >= 0]
+            pe += [k] * len(dn)
+            pd += dn
+        dof_factor_map = (np.array(pe), np.array(pd))
+    # the trace: per Newton iteration (load, cap factor, |R| after, penetrating Gauss
+    # points, how many entered / left the penetrating set)
+    its_log: list[tuple] = []
+    last_set = [None]
+
+    def record(self, f, trial):
+        if not trace:
+            return
+        n_in = n_out = n_act = -1
+        if law != "multipliers":
+            act = np.asarray(pen_cf(gp)).ravel() > 0.5
+            n_act = int(act.sum())
+            if last_set[0] is not None:
+                n_in = int((act & ~last_set[0]).sum())
+                n_out = int((~act & last_set[0]).sum())
+            last_set[0] = act
+        its_log.append((float(form.load.Get()), f, trial, n_act, n_in, n_out))
     radius = [trust]  # the trust region's radius, in local edge lengths
     original = newton_mod.Newton._line_search
 
     def capped(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened):
+        f = 1.0
+        if jcap > 0:  # the largest step keeping J >= jcap J(x0) at the integration points
+            f = j_step(dx)
         if trust > 0:
             d = dx.FV().NumPy()[vd]
             move = np.linalg.norm(d, axis=1) / hv
-            f = radius[0] / max(move.max(), 1e-300)
-            if f < 1:
+            if cap_near > 0:  # only the vertices near the rounded edge are capped
+                pos = X + x0.FV().NumPy()[vd]
+                dist = np.min([np.linalg.norm(pos - c, axis=1) for c in centres], axis=0)
+                move = np.where(dist < cap_near * rho, move, 0.0)
+            fm = radius[0] / max(move.max(), 1e-300)
+            if fm < 1 and trace:
+                iv = int(np.argmax(move))
+                p = X[iv]
+                print(f"  load {float(form.load.Get()):.4f} cap {fm:.2f} at r "
+                      f"{np.hypot(*p):.4f} theta {np.degrees(np.arctan2(p[1], p[0])):.2f} "
+                      f"hv {hv[iv]:.4f} moves {np.linalg.norm(d[iv]):.2e}", file=sys.stderr)
+            if fm < 1 and cap_mode == "local":  # each element's DOFs by its vertices' cap
+                fv = np.minimum(radius[0] / np.maximum(move, 1e-300), 1.0)
+                fd = np.ones(form.fes.ndof)
+                np.minimum.at(fd, dof_factor_map[1], fv[els].min(axis=1)[dof_factor_map[0]])
+                dx.FV().NumPy()[:] *= fd
                 limited[0] += 1
-                dx.data = f * dx
-                dlams = [f * dl for dl in dlams]
+            else:
+                f = min(f, fm)
+        if trust_normal > 0:  # the boundary's moves along the skull's normal, near it
+            a0 = x0.FV().NumPy()
+            p0 = X[bverts] + a0[vd_b]
+            g0, n0 = skull.gap_and_normal(p0)
+            dn = np.abs(np.einsum("ij,ij->i", n0, dx.FV().NumPy()[vd_b]))
+            near_skull = g0 < hv[bverts]
+            fn = trust_normal * hv[bverts] / np.maximum(dn, 1e-300)
+            f = min(f, float(fn[near_skull].min(initial=1.0)))
+        if f < 1:
+            limited[0] += 1
+            dx.data = f * dx
+            dlams = [f * dl for dl in dlams]
         if not line_search:  # the capped step is taken whatever the residual does
-            x.data = x0 - dx
-            for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
-                pc.lam = l0 - dl
-            trial = self.scaled_norm(self.residual(x))
+            sc = 1.0
+            while True:  # halved only while the trial state is not finite (inverted)
+                x.data = x0 - sc * dx
+                for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
+                    pc.lam = l0 - sc * dl
+                if soc:
+                    second_order_correction(x0, x)
+                trial = self.scaled_norm(self.residual(x))
+                if np.isfinite(trial) or not finite_backtrack or sc < 1 / 64:
+                    break
+                sc *= 0.5
+            f *= sc
+            record(self, f, trial)
             if trust_max > trust:  # the radius grows while the residual falls
                 radius[0] = (min(2 * radius[0], trust_max) if trial < norm
                              else max(radius[0] / 2, trust))
             return 1.0, trial, tightened
-        return original(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened)
+        out = original(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened)
+        record(self, f * (out[0] or 0.0), out[1])
+        return out
+
+    # the step bound by J: det(F - f G) = jcap det F at the first such f > 0
+    gdu = ngs.GridFunction(V)
+    urange = form.fes.Range(0)
+    jpts = m.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 4), ngs.VOL)
+    uF = form.gfu.components[0]
+
+    def j_step(dx) -> float:
+        gdu.vec.FV().NumPy()[:] = dx.FV().NumPy()[urange.start:urange.stop]
+        G = np.asarray(ngs.Grad(gdu)(jpts)).reshape(-1, 2, 2)
+        F = np.asarray(ngs.Grad(uF)(jpts)).reshape(-1, 2, 2) + np.eye(2)
+        detF = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+        a = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
+        b = -(F[:, 1, 1] * G[:, 0, 0] + F[:, 0, 0] * G[:, 1, 1]
+              - F[:, 0, 1] * G[:, 1, 0] - F[:, 1, 0] * G[:, 0, 1])
+        c = (1 - jcap) * detF
+        with np.errstate(invalid="ignore", divide="ignore"):
+            disc = np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))
+            roots = np.stack([(-b - disc) / (2 * a), (-b + disc) / (2 * a),
+                              np.where(b != 0, -c / b, np.inf)])
+        roots[:, (b * b - 4 * a * c) < 0] = np.inf
+        roots[2, np.abs(a) > 1e-14] = np.inf
+        roots[:2, np.abs(a) <= 1e-14] = np.inf
+        roots[roots <= 0] = np.inf
+        return float(min(roots.min(), 1.0))
+
+    # the boundary vertices in contact with the skull (the second-order correction's)
+    bnames = m.GetBoundaries()
+    bverts = np.unique([v.nr for el in m.Elements(ngs.BND)
+                        if bnames[el.index] in ("skull", "opening") for v in el.vertices])
+    vd_b = vd[bverts]
+
+    def second_order_correction(x0, x):
+        """Move each penetrating boundary vertex along the skull's normal by what the gap's
+        curvature added over the linear prediction (the Maratos effect's correction)."""
+        a0, a1 = x0.FV().NumPy(), x.FV().NumPy()
+        p0, p1 = X[bverts] + a0[vd_b], X[bverts] + a1[vd_b]
+        g0, n0 = skull.gap_and_normal(p0)
+        g1, n1 = skull.gap_and_normal(p1)
+        glin = g0 + np.einsum("ij,ij->i", n0, p1 - p0)
+        c = np.where(g1 < 0, np.maximum(glin - g1, 0.0), 0.0)
+        a1[vd_b] += c[:, None] * n1
 
     newton_mod.Newton._line_search = capped
     t0 = time.perf_counter()
-    sol = solver.solve()
+    if ramp == "slide":  # increments sized by the slide near the edge (edge2d_ramp)
+        from types import SimpleNamespace
+
+        from edge2d_ramp import ramp as slide_ramp
+
+        th = np.degrees(np.arctan2(X[:, 1], X[:, 0]))
+        r = np.hypot(X[:, 0], X[:, 1])
+        near = (r > R - 1e-6) & (np.min([np.abs(th - (90 + sg * beta / 2))
+                                         for sg in (-1, 1)], axis=0) < 10)
+        form.set_load(0.0)
+        after = finish = None
+        if al is not None:
+            def after(x, t):  # the multipliers follow each converged step
+                al[0]()
+                return 0
+
+            def finish(x):  # Uzawa at full load until the Gauss points' depth is al_tol
+                its_all = 0
+                for _ in range(al_passes):
+                    if al[1]() <= al_tol:
+                        return its_all, True
+                    al[0]()
+                    ok, its, _ = solver.newton(x, opt.tolerance)
+                    its_all += its
+                    if not ok:
+                        return its_all, False
+                return its_all, al[1]() <= al_tol
+        rr = slide_ramp(solver, form, boundary_dofs=vd[near], dt0=dt0, target=slide * hc,
+                        predictor=predictor, inter_tol=inter_tol, final_tol=opt.tolerance,
+                        after_step=after, finish=finish, verbose=trace, budget=budget)
+        sol = SimpleNamespace(converged=rr["converged"], load=rr["load"],
+                              newton_iterations=rr["newton_all"], rejected_steps=rr["rejected"],
+                              describe=lambda: "", accepted=rr["accepted"])
+    else:
+        sol = solver.solve()
     wall = time.perf_counter() - t0
 
     u = form.output_displacement() if hasattr(form, "output_displacement") else form.u
@@ -282,13 +476,18 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     skull_side = np.abs(theta_ref - 90) >= beta / 2
     slide = float(np.max(np.abs(theta_def - theta_ref)[skull_side]))
     g_sharp = region_gap(R, beta, 90.0, xP)[0]
+    if trace:
+        from edge2d_report import print_trace
+
+        print_trace(its_log, solver.history)
     uL = form.output_displacement() if hasattr(form, "output_displacement") else form.u
     JL = ngs.Det(ngs.Id(2) + ngs.Grad(uL))
     Jmin = float(np.min(JL(m.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 2), ngs.VOL))))
     return {"alpha": alpha, "beta": beta, "contact": contact, "rho": rho, "h": h,
             "half": half, "steps": steps, "trust": trust, "element": element,
             "converged": sol.converged, "load": round(sol.load, 4),
-            "newton": sol.newton_iterations, "rejected": sol.rejected_steps,
+            "newton": sol.newton_iterations,
+            "newton_all": sum(len(h) - 1 for h in solver.history), "rejected": sol.rejected_steps,
             "limited": limited[0], "wall_s": round(wall, 1), "top_uy": top,
             "crossing_round": float(max(-g_round.min(), 0)),
             "crossing_sharp": float(max(-g_sharp.min(), 0)), "Jmin": Jmin,
@@ -313,18 +512,69 @@ def main() -> None:
     ap.add_argument("--hc-ratio", type=float, default=3.0, help="rho / edge mesh size")
     ap.add_argument("--trust-max", type=float, default=0.0,
                     help="the trust radius doubles while the residual falls, up to this")
-    ap.add_argument("--law", default="multipliers", choices=("multipliers", "penalty"))
+    ap.add_argument("--law", default="multipliers",
+                    choices=("multipliers", "penalty", "augmented"))
+    ap.add_argument("--al-tol", type=float, default=2e-4,
+                    help="augmented: Uzawa passes at full load until no Gauss point is "
+                    "deeper than this [R]")
     ap.add_argument("--kappa", type=float, default=1e7, help="penalty [stress/length]")
     ap.add_argument("--onset", type=float, default=0.0,
                     help="the penalty's cubic onset depth [R] (C2 law; 0: quadratic)")
+    ap.add_argument("--frozen", action="store_true",
+                    help="penalty: the gap linearised at the current state (no curvature "
+                    "term in the tangent)")
+    ap.add_argument("--inter-tol", type=float, default=1e-6,
+                    help="Newton's tolerance below full load (the last step: 1e-9)")
+    ap.add_argument("--ramp", default="fixed", choices=("fixed", "slide"),
+                    help="fixed: the product's ramp (--steps); slide: increments sized by the "
+                    "slide near the edge (benchmarks/edge2d_ramp.py)")
+    ap.add_argument("--slide", type=float, default=1.0,
+                    help="--ramp slide: the target slide per step, in edge mesh sizes")
+    ap.add_argument("--dt0", type=float, default=0.05, help="--ramp slide: first increment")
+    ap.add_argument("--predictor", default="secant", choices=("secant", "none"))
+    ap.add_argument("--cap-mode", default="global", choices=("global", "local"),
+                    help="global: the whole update scaled; local: each element's DOFs by "
+                    "the least factor of its vertices")
+    ap.add_argument("--finite", action="store_true",
+                    help="without the line search: halve a step while its residual is not "
+                    "finite (an inverted element)")
+    ap.add_argument("--soc", action="store_true",
+                    help="without the line search: a second-order correction of each update "
+                    "(penetrating boundary vertices moved back by the gap's curvature term)")
+    ap.add_argument("--jcap", type=float, default=0.0,
+                    help="a step bound by the volume ratio: no update takes J below this "
+                    "fraction of its value at any integration point (0: off)")
+    ap.add_argument("--trust-normal", type=float, default=0.0,
+                    help="an update never moves an arc vertex near the skull along the "
+                    "skull's normal more than this fraction of its smallest edge (0: off)")
+    ap.add_argument("--cap-near", type=float, default=0.0,
+                    help="the --trust cap only for vertices within this many rho of a "
+                    "rounding's centre (0: every vertex)")
+    ap.add_argument("--trace", action="store_true",
+                    help="per load step on stderr: iterations, caps, |R|, set changes")
     ap.add_argument("--table", action="store_true", help="every row of TABLE")
+    ap.add_argument("--budget", type=int, default=400,
+                    help="--ramp slide: stop after this many Newton iterations")
+    ap.add_argument("--sweep", action="store_true",
+                    help="the sector study's 32 scenarios (alphas x betas x sliding / "
+                    "noslip) with the other options given, each in its own process")
     a = ap.parse_args()
+    if a.sweep:
+        from edge2d_report import sweep
+
+        sweep(__file__, [arg for arg in sys.argv[1:] if arg != "--sweep"])
+        return
     if not a.table:
         print(json.dumps(run(a.alpha, a.beta, a.contact, a.rho, a.h, not a.full, a.steps,
                              a.trust, a.element,
                              line_search=not a.no_line_search, rounding=a.rounding,
                              hc_ratio=a.hc_ratio, law=a.law, kappa=a.kappa,
-                             trust_max=a.trust_max, onset=a.onset)))
+                             trust_max=a.trust_max, onset=a.onset, trace=a.trace,
+                             frozen=a.frozen, inter_tol=a.inter_tol, ramp=a.ramp,
+                             slide=a.slide, dt0=a.dt0, predictor=a.predictor,
+                             cap_mode=a.cap_mode, finite_backtrack=a.finite, soc=a.soc,
+                             jcap=a.jcap, al_tol=a.al_tol, budget=a.budget,
+                             trust_normal=a.trust_normal, cap_near=a.cap_near)))
         return
     keys = ("alpha", "beta", "contact", "law", "element", "rho", "hc_ratio", "h", "half",
             "steps", "trust", "line_search", "rounding")
