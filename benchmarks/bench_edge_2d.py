@@ -296,7 +296,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     its_log: list[tuple] = []
     last_set = [None]
 
-    def record(self, f, trial):
+    def record(f, trial):
         if not trace:
             return
         n_in = n_out = n_act = -1
@@ -309,9 +309,12 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             last_set[0] = act
         its_log.append((float(form.load.Get()), f, trial, n_act, n_in, n_out))
     radius = [trust]  # the trust region's radius, in local edge lengths
-    original = newton_mod.Newton._line_search
+    original = newton_mod._line_search
 
-    def capped(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened):
+    def capped(eq, state, x0, dx, dlams, norm, tol, retry, tightened, run, opt):
+        """Newton's line search (solver/newton.py) with the prototype's step bounds before it
+        (or instead of it, without the line search); ``x0`` the state's snapshot."""
+        x = state.x
         f = 1.0
         if jcap > 0:  # the largest step keeping J >= jcap J(x0) at the integration points
             f = j_step(dx)
@@ -319,7 +322,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             d = dx.FV().NumPy()[vd]
             move = np.linalg.norm(d, axis=1) / hv
             if cap_near > 0:  # only the vertices near the rounded edge are capped
-                pos = X + x0.FV().NumPy()[vd]
+                pos = X + x0.x.FV().NumPy()[vd]
                 dist = np.min([np.linalg.norm(pos - c, axis=1) for c in centres], axis=0)
                 move = np.where(dist < cap_near * rho, move, 0.0)
             fm = radius[0] / max(move.max(), 1e-300)
@@ -338,7 +341,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             else:
                 f = min(f, fm)
         if trust_normal > 0:  # the boundary's moves along the skull's normal, near it
-            a0 = x0.FV().NumPy()
+            a0 = x0.x.FV().NumPy()
             p0 = X[bverts] + a0[vd_b]
             g0, n0 = skull.gap_and_normal(p0)
             dn = np.abs(np.einsum("ij,ij->i", n0, dx.FV().NumPy()[vd_b]))
@@ -352,23 +355,23 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         if not line_search:  # the capped step is taken whatever the residual does
             sc = 1.0
             while True:  # halved only while the trial state is not finite (inverted)
-                x.data = x0 - sc * dx
-                for pc, l0, dl in zip(self.contact.contacts, lam0, dlams, strict=True):
-                    pc.lam = l0 - sc * dl
+                x.data = x0.x - sc * dx
+                state.set_multipliers([l0 - sc * dl for l0, dl in zip(x0.lam, dlams,
+                                                                       strict=True)])
                 if soc:
-                    second_order_correction(x0, x)
-                trial = self.scaled_norm(self.residual(x))
+                    second_order_correction(x0.x, x)
+                trial = eq.scaled_norm(eq.residual(x))
                 if np.isfinite(trial) or not finite_backtrack or sc < 1 / 64:
                     break
                 sc *= 0.5
             f *= sc
-            record(self, f, trial)
+            record(f, trial)
             if trust_max > trust:  # the radius grows while the residual falls
                 radius[0] = (min(2 * radius[0], trust_max) if trial < norm
                              else max(radius[0] / 2, trust))
             return 1.0, trial, tightened
-        out = original(self, x, x0, lam0, dx, dlams, norm, tol, retry, tightened)
-        record(self, f * (out[0] or 0.0), out[1])
+        out = original(eq, state, x0, dx, dlams, norm, tol, retry, tightened, run, opt)
+        record(f * (out[0] or 0.0), out[1])
         return out
 
     # the step bound by J: det(F - f G) = jcap det F at the first such f > 0
@@ -413,7 +416,14 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         c = np.where(g1 < 0, np.maximum(glin - g1, 0.0), 0.0)
         a1[vd_b] += c[:, None] * n1
 
-    newton_mod.Newton._line_search = capped
+    newton_mod._line_search = capped
+    history: list[tuple[float, ...]] = []  # each Newton solve's scaled residuals
+
+    def newton(tol: float) -> tuple[bool, int, float]:
+        """One Newton solve at the form's load from its state (the slide ramp's)."""
+        res = solver.newton(tol)
+        history.append(res.residuals)
+        return res.converged, res.iterations, res.norm
     t0 = time.perf_counter()
     if ramp == "slide":  # increments sized by the slide near the edge (edge2d_ramp)
         from types import SimpleNamespace
@@ -437,19 +447,21 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
                     if al[1]() <= al_tol:
                         return its_all, True
                     al[0]()
-                    ok, its, _ = solver.newton(x, opt.tolerance)
+                    ok, its, _ = newton(opt.newton.tolerance)
                     its_all += its
                     if not ok:
                         return its_all, False
                 return its_all, al[1]() <= al_tol
-        rr = slide_ramp(solver, form, boundary_dofs=vd[near], dt0=dt0, target=slide * hc,
-                        predictor=predictor, inter_tol=inter_tol, final_tol=opt.tolerance,
+        rr = slide_ramp(newton, form, boundary_dofs=vd[near], dt0=dt0, target=slide * hc,
+                        predictor=predictor, inter_tol=inter_tol,
+                        final_tol=opt.newton.tolerance,
                         after_step=after, finish=finish, verbose=trace, budget=budget)
         sol = SimpleNamespace(converged=rr["converged"], load=rr["load"],
                               newton_iterations=rr["newton_all"], rejected_steps=rr["rejected"],
                               describe=lambda: "", accepted=rr["accepted"])
     else:
         sol = solver.solve()
+        history = [r.residuals for r in sol.newton_results]
     wall = time.perf_counter() - t0
 
     u = form.output_displacement() if hasattr(form, "output_displacement") else form.u
@@ -479,7 +491,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     if trace:
         from edge2d_report import print_trace
 
-        print_trace(its_log, solver.history)
+        print_trace(its_log, history)
     uL = form.output_displacement() if hasattr(form, "output_displacement") else form.u
     JL = ngs.Det(ngs.Id(2) + ngs.Grad(uL))
     Jmin = float(np.min(JL(m.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 2), ngs.VOL))))
@@ -487,7 +499,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             "half": half, "steps": steps, "trust": trust, "element": element,
             "converged": sol.converged, "load": round(sol.load, 4),
             "newton": sol.newton_iterations,
-            "newton_all": sum(len(h) - 1 for h in solver.history), "rejected": sol.rejected_steps,
+            "newton_all": sum(len(h) - 1 for h in history), "rejected": sol.rejected_steps,
             "limited": limited[0], "wall_s": round(wall, 1), "top_uy": top,
             "crossing_round": float(max(-g_round.min(), 0)),
             "crossing_sharp": float(max(-g_sharp.min(), 0)), "Jmin": Jmin,

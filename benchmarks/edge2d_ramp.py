@@ -1,10 +1,10 @@
 """A load ramp for the resolved-edge prototype (:mod:`bench_edge_2d`): increments sized by how
 far the tissue slides near the skull's edge, a predictor, every Newton iteration counted.
 
-:func:`ramp` raises the load factor from 0 to 1 with Newton
-(:meth:`brainbulge.solver.newton.Newton.newton`) at each load. After an accepted step the
-next increment is ``dt * clip(target / slide, 1/2, grow)``, with ``slide`` the largest
-displacement increment of the boundary vertices within ``band`` degrees of the edge and
+:func:`ramp` raises the load factor from 0 to 1 with Newton (``newton(tol)``, the product's
+Newton solve at the current load) at each load. After an accepted step the next increment
+is ``dt * clip(target / slide, 1/2, grow)``, with ``slide`` the largest displacement
+increment of the boundary vertices within ``band`` degrees of the edge and
 ``target`` a fraction of the edge's mesh size; a failed step is halved. The predictor
 extrapolates the last increment (``secant``) or starts from the last state (``none``).
 Below full load Newton stops at ``inter_tol``, at full load at ``final_tol``. The iteration
@@ -19,11 +19,12 @@ import time
 import numpy as np
 
 
-def ramp(solver, form, *, boundary_dofs: np.ndarray, dt0: float, target: float,
+def ramp(newton, form, *, boundary_dofs: np.ndarray, dt0: float, target: float,
          predictor: str = "secant", inter_tol: float = 1e-6, final_tol: float = 1e-9,
          grow: float = 2.0, dt_max: float = 1.0, dt_min: float = 1e-3, budget: int = 10**9,
          after_step=None, finish=None, verbose: bool = False) -> dict:
-    """Ramp ``form``'s load to 1 with ``solver`` (a :class:`NewtonSolver`); ``boundary_dofs``
+    """Ramp ``form``'s load to 1 with ``newton(tol) -> (converged, iterations, |R|)``, one
+    Newton solve at the form's load from its state; ``boundary_dofs``
     (k, 2): the displacement DOFs of the vertices whose slide sizes the increments;
     ``after_step(x, t)``: called after each accepted step below full load (e.g. a multiplier
     update; returns the number of extra Newton iterations it spent); ``finish(x)``: called
@@ -44,7 +45,7 @@ def ramp(solver, form, *, boundary_dofs: np.ndarray, dt0: float, target: float,
         form.set_load(t + dt)
         if inc is not None and predictor == "secant":
             x.data = x_prev + (dt / last_dt) * inc
-        ok, its, norm = solver.newton(x, final_tol if final else inter_tol)
+        ok, its, norm = newton(final_tol if final else inter_tol)
         total += its
         if not ok:
             rejected += 1
