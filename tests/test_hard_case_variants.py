@@ -143,7 +143,7 @@ def test_opened_skull_gap_is_the_distance_to_the_opened_region():
     """``S`` opened by a disk of radius ``rho``: ``g = 1 - r`` under the arc, the distance
     to the nominal edge's ray (end face) in the opening above ``R + rho``, and the rounded
     corner's distance (centre at ``rho`` from both); ``grad g`` matches central differences."""
-    from bench_edge_2d import OpenedSkull
+    from edge2d_geometry import OpenedSkull
 
     rho, half = 0.03, math.radians(30)
     skull = OpenedSkull(1.0, 60.0, rho)
