@@ -92,8 +92,11 @@ def m_sliding_rotation(run: Run) -> Row:
     why = []
     if towards < 0.1:
         why.append("the tissue at the edge slides under the skull, away from the opening, not "
-                   "out of it (the paper's sharp-edged arc; "
-                   f"[docs/model.md, section 10]({SKULL_SECTION}))")
+                   "out of it: our held arc (the material arc held to r <= R past the "
+                   f"opening's edge, [docs/model.md, section 10]({SKULL_SECTION})), not the "
+                   "paper's edge; with the edge released and rounded (rho 0.03 R, "
+                   "benchmarks/bench_edge_2d.py) the material 0.16 deg under the skull's edge "
+                   "ends 1.4 deg inside the opening, turned out round the edge")
     if not turns:
         why.append("the tissue next to the edge does not turn out more with sliding")
     return Row(ours, "differs" if not (slides and turns) else "holds", "; ".join(why))
@@ -298,9 +301,12 @@ def _why_iv(rows) -> str:
 def _why_v(rows) -> str:
     held, n, lo, hi = _ratio_text(rows, "max_tangential_stretch", "sliding")
     return (f"sliding's tangential maximum is the larger in only {held} of {n} cases "
-            f"({100 * (lo - 1):+.1f} to {100 * (hi - 1):+.1f} %): with the paper's sharp-edged "
-            "arc the tissue at the edge slides under the skull, away from the opening "
-            "(3.2-sliding-rotation), instead of turning out around the edge")
+            f"({100 * (lo - 1):+.1f} to {100 * (hi - 1):+.1f} %): with our held arc the "
+            "tissue at the edge slides under the skull, away from the opening "
+            "(3.2-sliding-rotation), instead of turning out around the edge; cause not found: "
+            "with the edge released (the edge-vertex variant of bench_hard_cases.py) the "
+            "ring's sliding / no-slip ratio is 1.03 (headline) and 0.84 (alpha 60 / beta 30, "
+            "load 0.95), so the edge alone does not restore (v)")
 
 
 #: the measured reason why each trend does not hold as stated
