@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # loaded on use: the command line's parser reads the case wit
     from brainbulge.geometry.skull2d import RigidSkull2D, SkullArc2D
     from brainbulge.materials import MooneyRivlin
     from brainbulge.model.problem import Problem
+    from brainbulge.solver.options import SolverOptions
 
 CONTACTS = ("sliding", "noslip")
 SKULLS = ("paper", "rigid")
@@ -53,6 +54,23 @@ ELEMENTS = ("mini", "taylor-hood")
 #: Figure 4): the default of :attr:`HemidiskCase.swelling`
 SECTOR_SWELLING = 1.2
 DISK_SWELLING = 1.3
+#: the rounded skull edge: the arc's mesh size there is the edge radius over this (the
+#: active set cycles with the rounding unresolved, at rho on an h = 0.05 R mesh; rho/3 and
+#: rho/5 converge; docs/design.md)
+EDGE_MESH_RATIO = 3.0
+#: the penalty's stiffness in units of the tissue's shear modulus over R: the skull is entered
+#: by the contact pressure / kappa, 3.5e-5 to 8e-5 R at Js 1.2 (kappa = 1e7 for the paper's
+#: gray matter at R = 1); a ten times softer one let the small openings' tissue 1e-2 R in
+PENALTY = 3.0e4
+#: the resolved edge's step control (ramp, newton options): each load step sized so that
+#: the tissue at the edge slides about two edge elements, from the last converged state, every
+#: Newton update capped at 0.3 of the smallest edge at a vertex and taken as it is (the best
+#: of the variants measured, docs/design.md: 2D headline 120 -> 69 Newton iterations)
+RESOLVED_EDGE_STEPS = ({"slide": 2.0, "predictor": False},
+                       {"step_cap": 0.3, "line_search": False})
+#: the paper's zero-thickness arc, rounded, is given this thickness [R]: no bulge reaches
+#: its outer surface, and tissue pressing out past the rounding meets the end face
+PAPER_SKULL_THICKNESS = 2.0
 #: element sizes [units of R]: 0.005 R makes ~150,000 triangles (P2: hours of Newton); a
 #: corner or rim size below 1e-4 R makes Netgen grade over 4 decades
 MESH_SIZE_RANGE = (0.005, 1.0)
@@ -105,7 +123,10 @@ class HemidiskCase:
     skull_thickness: float = option(0.2, "thickness of the rigid skull", unit=" R",
                                     internal=True)
     skull_edge_radius: float = option(
-        0.05, "rounding radius of the rigid skull's cut edge (skull rigid)", unit=" R")
+        0.03, "rounding radius of the skull's edge at the opening (0: the paper's sharp "
+        "edge, the skull arc held, skull paper only); the arc is meshed at a third of it "
+        "near the edge", unit=" R", range=(0.0, 0.1),
+        hint="0.015-0.05 R measured (docs/verification.md)")
     edge_exclusion: float = option(
         0.05, "radius around the singular points left out of max_*/min_*", unit=" R",
         range=(0.0, 0.2), hint="beyond, max_*/min_* cover little")
@@ -119,6 +140,9 @@ class HemidiskCase:
         if self.skull not in SKULLS:
             raise InputError(f"skull {self.skull!r} unknown; choose 'paper' (the paper's arc) "
                              "or 'rigid' (a rigid shell with rounded cut edges)")
+        if self.skull == "rigid" and self.skull_edge_radius <= 0:
+            raise InputError("the rigid skull needs a rounded cut edge: give "
+                             "--skull-edge-radius > 0")
         if not isinstance(self.rezone, bool):
             raise InputError(f"rezone = {self.rezone!r} must be true or false")
         if self.disk is not None:
@@ -161,11 +185,26 @@ class HemidiskCase:
             return self.rim_mesh_size * self.R
         return self.mesh_size * self.R / 10
 
+    @property
+    def rounded(self) -> bool:
+        """Whether the skull's edge is rounded (``skull_edge_radius > 0``): the contact is
+        then one penalty on the whole arc against the rounded skull, on a mesh resolved at
+        the edge, with the resolved edge's step control (:data:`RESOLVED_EDGE_STEPS`)."""
+        return self.skull_edge_radius > 0
+
+    @property
+    def edge_h(self) -> float | None:
+        """Element size along the arc at the opening's edges [length]: the edge radius over
+        :data:`EDGE_MESH_RATIO` (None for the sharp edge)."""
+        return self.skull_edge_radius * self.R / EDGE_MESH_RATIO if self.rounded else None
+
     def mesh(self) -> ngs.Mesh:
-        """The reference mesh: ``mesh_size``, ``corner_h`` at the singular points and
-        ``rim_h`` on the rims of the edge-exclusion disks, where ``max_*`` / ``min_*`` sit."""
+        """The reference mesh: ``mesh_size``, ``corner_h`` at the singular points,
+        ``rim_h`` on the rims of the edge-exclusion disks, where ``max_*`` / ``min_*`` sit,
+        and ``edge_h`` along the arc at the opening's edges."""
         return self.geometry.mesh(
-            self.mesh_size * self.R, self.corner_h, self.rim_h, self.edge_exclusion * self.R
+            self.mesh_size * self.R, self.corner_h, self.rim_h, self.edge_exclusion * self.R,
+            self.edge_h,
         )
 
     @property
@@ -177,21 +216,44 @@ class HemidiskCase:
 
     @property
     def rigid_skull(self) -> RigidSkull2D:
-        """The rigid shell of the ``rigid`` skull (its parameters are checked for either)."""
+        """The skull with its edge rounded: the ``rigid`` skull's shell, or the paper's arc
+        given :data:`PAPER_SKULL_THICKNESS` (beyond any bulge) so that tissue pressing out
+        past the rounding meets the bone's end face."""
         from brainbulge.geometry.skull2d import RigidSkull2D
 
+        thickness = self.skull_thickness if self.skull == "rigid" else PAPER_SKULL_THICKNESS
         return RigidSkull2D(
             R=self.R,
             beta_deg=self.beta,
             center_deg=self.opening_center,
-            thickness=self.skull_thickness * self.R,
+            thickness=thickness * self.R,
             edge_radius=self.skull_edge_radius * self.R,
         )
 
     @property
     def obstacle(self) -> SkullArc2D | RigidSkull2D:
-        """The skull the tissue is in contact with: the paper's arc or the rigid shell."""
-        return self.skull_arc if self.skull == "paper" else self.rigid_skull
+        """The skull the tissue is in contact with: the rounded skull, or the paper's
+        sharp-edged arc (``skull_edge_radius = 0``)."""
+        return self.rigid_skull if self.rounded else self.skull_arc
+
+    def contact_stiffness(self) -> float:
+        """The penalty's stiffness ``kappa = PENALTY mu / R`` [stress/length]
+        (:data:`PENALTY`)."""
+        return PENALTY * self.tissue_material().shear_modulus / self.R
+
+    def solver_options(self, progress: bool = False) -> SolverOptions:
+        """The solver's options for this case: its ``steps``, and on a rounded edge the
+        resolved edge's step control (:data:`RESOLVED_EDGE_STEPS`)."""
+        from dataclasses import replace
+
+        from brainbulge.solver.options import SolverOptions
+
+        options = SolverOptions(steps=self.steps, progress=progress)
+        if not self.rounded:
+            return options
+        ramp, newton = RESOLVED_EDGE_STEPS
+        return SolverOptions(ramp=replace(options.ramp, **ramp),
+                             newton=replace(options.newton, **newton), progress=progress)
 
     def tissue_material(self) -> MooneyRivlin:
         from brainbulge.materials import preset
@@ -213,6 +275,13 @@ def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Proble
     m = case.tissue_material()
     materials = {r: m for r in set(mesh.GetMaterials())}
     swelling = {"swelling": case.swelling}
+    if case.rounded:  # one penalty contact on the whole arc against the rounded skull
+        kappa = case.contact_stiffness()
+        if case.contact == "noslip":
+            opening = [Contact("opening", skull, kappa)] if case.beta > 0 else []
+            return Problem(mesh, materials, swelling, clamped="base|skull", contacts=opening)
+        return Problem(mesh, materials, swelling, clamped="base",
+                       contacts=[Contact("skull|opening", skull, kappa)])
     if case.contact == "noslip":
         opening = []  # the paper's opening is traction-free and meets no obstacle
         if case.skull == "rigid" and case.beta > 0:

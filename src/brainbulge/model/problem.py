@@ -34,17 +34,21 @@ class Obstacle(Protocol):
 
 @dataclass
 class Contact:
-    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``, solved with
-    exact multipliers at the boundary nodes by a primal-dual active set."""
+    """Frictionless unilateral contact of ``boundary`` with a rigid ``obstacle``: with exact
+    multipliers at the boundary nodes by a primal-dual active set (``penalty`` None), or by
+    a penalty ``penalty/2 max(-g, 0)^2`` at the boundary's Gauss points (``penalty``: its
+    stiffness [stress/length]; the obstacle then needs ``gap(x)`` on NGSolve coefficient
+    functions; 2D)."""
 
     boundary: str
     obstacle: Obstacle
+    penalty: float | None = None
 
     def __post_init__(self) -> None:
-        if not hasattr(self.obstacle, "gap_and_normal"):
+        need = "gap_and_normal" if self.penalty is None else "gap"
+        if not hasattr(self.obstacle, need):
             raise InputError(f"the obstacle of contact boundary {self.boundary!r} has no "
-                             "gap_and_normal(x) on point arrays; give it one")
-
+                             f"{need}(x); give it one")
 
 
 @dataclass

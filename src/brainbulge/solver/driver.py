@@ -10,7 +10,8 @@ ContrastPath`). :func:`walk` owns the step control, the same for all (:class:`St
 - a step that fails is cut, ``ds <- cut ds``, and tried again from the last accepted state,
   until ``ds`` would fall below ``min_step``: then the path fails there;
 - a step that converged within ``fast_iterations`` Newton iterations lets the next one grow,
-  ``ds <- grow ds``;
+  ``ds <- grow ds``; or, where the path measures how far a step moved, the next is sized
+  to move ``slide`` (:meth:`StepControl.next_step`);
 - after every accepted step the path may write its checkpoint and may stop (its hooks);
 - after an accepted or a failed step the path may change its discretisation (the transfer
   of 2D rezoning): the walk goes on from its new state with the step it gives.
@@ -36,22 +37,36 @@ log = logging.getLogger("brainbulge")
 class StepControl:
     """How :func:`walk` changes the step ``ds`` [parameter units]: ``cut`` after a failed
     step [-], ``grow`` after one that converged within ``fast_iterations`` Newton iterations
-    [-], and the smallest step ``min_step`` before the path fails."""
+    [-], and the smallest step ``min_step`` before the path fails; with ``slide`` [-] the
+    next step is sized by how far the accepted one moved (:meth:`next_step`)."""
 
     cut: float
     grow: float
     fast_iterations: int
     min_step: float
+    slide: float = 0.0
+
+    def next_step(self, ds: float, tried: Tried) -> float:
+        """The step after an accepted one of ``ds``: sized by its ``motion`` (``ds slide /
+        motion`` clipped to ``[cut, grow] ds``) when the path measured one and ``slide`` is
+        set, else grown after an easy step."""
+        if self.slide > 0 and tried.motion is not None:
+            ratio = self.slide / max(tried.motion, 1e-300)
+            return ds * min(max(ratio, self.cut), self.grow)
+        return ds * self.grow if tried.iterations <= self.fast_iterations else ds
 
 
 @dataclass(frozen=True)
 class Tried:
-    """One step's try: converged or not, the Newton iterations of all its attempts, and the
-    last attempt's result (:class:`~brainbulge.solver.newton.NewtonResult`, or None)."""
+    """One step's try: converged or not, the Newton iterations of all its attempts, the
+    last attempt's result (:class:`~brainbulge.solver.newton.NewtonResult`, or None) and,
+    where the path measures it, how far the converged step moved (``motion``, in the units
+    of :attr:`StepControl.slide`)."""
 
     converged: bool
     iterations: int
     result: Any = None
+    motion: float | None = None
 
 
 class Continuation(Protocol):
@@ -134,8 +149,7 @@ def walk(path: Continuation) -> Solution:
             path.accept(s + ds, ds, last, tried, sol)
             s += ds
             last = path.snapshot()
-            if tried.iterations <= control.fast_iterations:
-                ds *= control.grow
+            ds = control.next_step(ds, tried)
             if path.settled(s, ds, sol):
                 break
             if (fresh := path.transfer(s, sol, failed=False)) is not None:

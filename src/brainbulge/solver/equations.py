@@ -211,6 +211,8 @@ class MixedEquations:
         return X[v] + u
 
     def max_penetration(self) -> float:
-        """Largest penetration ``max(-g, 0)`` of the moving contact points [length]."""
-        return self.contact.max_penetration()
+        """Largest penetration ``max(-g, 0)`` of the moving contact points and of the
+        penalty contacts' Gauss points [length]."""
+        return max([self.contact.max_penetration(),
+                    *(pc.max_penetration() for pc in self.form.penalty_contacts)])
 

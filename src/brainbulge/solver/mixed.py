@@ -8,7 +8,7 @@ with ``Js(t) = 1 + t (Js - 1)`` the swelling ramped by the load factor ``t`` in 
 is the Lagrange multiplier of ``J = Js`` (tension positive). Contact with the rigid skull is
 frictionless and unilateral, with exact multipliers at the boundary's contact points
 (:mod:`brainbulge.solver.contact`): their forces are added to the residual outside the
-energy.
+energy; or, in 2D, by a penalty in the energy (:mod:`brainbulge.solver.contact.penalty`).
 
 NGSolve's ``Variation`` differentiates ``Pi`` symbolically: residual and tangent come exactly
 from the energy. Inf-sup stable pairs: Taylor-Hood P2/P1 (2D and 3D) and MINI, P1 + bubble /
@@ -27,6 +27,7 @@ from brainbulge.materials.kinematics import deformation_gradient
 from brainbulge.materials.mooney_rivlin import MooneyRivlin, mooney_rivlin_psi
 from brainbulge.model.problem import Problem
 from brainbulge.solver.compile_cache import compilation_failed, native_compiler_ready
+from brainbulge.solver.contact.penalty import PenaltyContact
 from brainbulge.solver.contact.points import PointContact
 
 ELEMENTS = ("taylor-hood", "mini")
@@ -92,7 +93,12 @@ class MixedForm:
         self.mu_max = max(m.shear_modulus for m in problem.materials.values())
         self.h = _mesh_size(mesh)
         self.point_contacts = [PointContact(self, c.boundary, c.obstacle)
-                               for c in problem.contacts]
+                               for c in problem.contacts if c.penalty is None]
+        # contact by a penalty in the energy (2D, :mod:`brainbulge.solver.contact.penalty`)
+        self.penalty_contacts = [PenaltyContact(self, c.boundary, c.obstacle, c.penalty)
+                                 for c in problem.contacts if c.penalty is not None]
+        for pc in self.penalty_contacts:
+            self.a += ngs.Variation(pc.energy(u) * pc.ds)
 
     def _psi_iso(self, F: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         """Isochoric energy over all regions: one expression with region-wise coefficients."""
@@ -110,7 +116,7 @@ class MixedForm:
 
     @property
     def contacts_present(self) -> bool:
-        return bool(self.point_contacts)
+        return bool(self.point_contacts or self.penalty_contacts)
 
     # --- fields of the current state -------------------------------------------------
     @property
@@ -172,6 +178,8 @@ class MixedForm:
         total = ngs.CF(0)
         for pc in self.point_contacts:
             total = total + pc.fields()[0]
+        for pen in self.penalty_contacts:
+            total = total + pen.pressure()
         return total
 
     def gap(self) -> ngs.CoefficientFunction:
@@ -179,6 +187,8 @@ class MixedForm:
         total = ngs.CF(0)
         for pc in self.point_contacts:
             total = total + pc.fields()[1]
+        for pen in self.penalty_contacts:
+            total = total + pen.gap()
         return total
 
 

@@ -269,7 +269,8 @@ def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVec
     """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
     ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
 
-    Returns ``(s, |R(trial)|, tightened)``: ``s > 0`` accepted (the state is the trial);
+    Without ``options.newton.line_search`` the update is taken as it is where its residual
+    is finite. Returns ``(s, |R(trial)|, tightened)``: ``s > 0`` accepted (the state is the trial);
     ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
     penetrating points were forced active, or a loose Krylov direction gave no step and
     is solved 100x tighter (once per iteration: ``tightened``); ``s = None`` when no step
@@ -282,6 +283,8 @@ def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVec
         state.set_multipliers([l0 - s * dl for l0, dl in zip(x0.lam, dlams, strict=True)])
         trial = eq.scaled_norm(eq.residual(x))
         if trial < (1 - nw.armijo * s) * norm or trial <= tol:
+            return s, trial, tightened
+        if not nw.line_search and np.isfinite(trial):  # the (capped) update as it is
             return s, trial, tightened
         if s == 1.0 and retry and eq.contact.force_penetrating():
             return 0.0, trial, tightened

@@ -187,6 +187,18 @@ class RampOptions(OptionGroup):
         1.5, "a load step that converged within fast_iterations lets the next one grow by "
         "this factor (less than the cut's inverse, so a cut step is not regrown at once; "
         "no other value measured)", unit=RATIO, range=(1.0, 10.0))
+    slide: float = option(
+        0.0, "after an accepted step the next is scaled by slide / (the largest "
+        "displacement increment of a vertex in units of its smallest edge), clipped to "
+        "[cut, grow] (0: grow after easy steps instead). On a resolved skull edge the "
+        "tissue wrapping the rounding moves farthest in element sizes, and the capped "
+        "Newton updates cost about that motion over newton.step_cap",
+        unit=" element sizes", range=(0.0, 100.0))
+    predictor: bool = option(
+        True, "start each load step from the last increment extrapolated (False: from the "
+        "last converged state). On the resolved skull edge the extrapolation carries the "
+        "tissue along the chord of the rounding into the skull (2D headline: 180 Newton "
+        "iterations with it, 99 without)")
     fast_iterations: int = option(
         4, "Newton iterations within which a converged load step counts as easy (the next "
         "grows): a full step from a good predictor converges quadratically in 2-4",
@@ -245,6 +257,17 @@ class NewtonOptions(OptionGroup):
         30.0, "a Newton solve running longer than this logs each iteration at INFO (else "
         "DEBUG), so a long fine-mesh solve shows its progress (negative: always)",
         unit=" s", range=(-1.0, 1e9), label="slow_newton_s")
+    step_cap: float = option(
+        0.0, "a trust region on the Newton update: it is scaled so that no vertex moves "
+        "more than this fraction of its smallest incident edge (0: off). On the resolved "
+        "skull edge a full update moved the tissue around the rounding by several edge "
+        "elements and inverted the fillet's elements; 0.3 was the best of 0.2-1 measured",
+        unit=RATIO, range=(0.0, 100.0), label="step_cap")
+    line_search: bool = option(
+        True, "backtrack on the residual norm from the (capped) update; False: take the "
+        "capped update as it is. With the penalty contact at a rounded edge the residual "
+        "rises before it falls and the line search stalled the small openings",
+        label="line_search")
     closed_form: bool = option(
         True, "the closed-form MINI residual and tangent where they apply (fast/"
         "mini_tangent, mini_plane; False: NGSolve's, the same to round-off, slower)",

@@ -7,10 +7,12 @@ load factor by ``dt``, predicts the new state by extrapolating the last incremen
 
     x_pred = x_prev + (dt / dt_last) (x_prev - x_before),
 
-and solves from it; if that fails, once more from the last converged state. A step that still
+and solves from it (without ``predictor``: from the last converged state); if that fails,
+once more from the last converged state. A step that still
 fails is cut, ``dt <- cut dt``, and retried from the last converged state; a step that
 converged within ``fast_iterations`` lets the next grow, ``dt <- grow dt`` (``options.ramp``:
-0.5, 4 and 1.5). The ramp stops with a :class:`Failure` (the load, the step, the last Newton
+0.5, 4 and 1.5), or, with ``slide``, the next step is sized by how far the last one moved
+the vertices in their element sizes (:class:`~brainbulge.solver.step_bounds.Slide`). The ramp stops with a :class:`Failure` (the load, the step, the last Newton
 attempt's residual, iterations and reason, and where its force residual peaked) when the
 step would fall below ``min_step``, and early when a stop hook of :class:`SolverOptions` says
 so. Below full load Newton converges only to ``intermediate_tolerance``. After every accepted
@@ -39,6 +41,7 @@ from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.newton import NewtonResult, StepLimit, newton
 from brainbulge.solver.options import Costs, Failure, Solution, SolverOptions, StepRecord
 from brainbulge.solver.state import Snapshot
+from brainbulge.solver.step_bounds import Slide, StepCap
 
 log = logging.getLogger("brainbulge")
 
@@ -63,13 +66,17 @@ class NewtonSolver:
         self.relaxation = (HotspotRelaxation(self.equations, self.opt.hotspot)
                            if self.opt.newton.hotspot_relaxation and HotspotRelaxation.applies(form)
                            else None)
+        cap = self.opt.newton.step_cap
+        #: the trust region on each update (option ``newton.step_cap``)
+        self.step_cap = StepCap(form, cap) if cap > 0 else None
 
     def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
                limit_step: StepLimit | None = None) -> NewtonResult:
-        """One Newton solve at the form's load from its state (:func:`newton`)."""
+        """One Newton solve at the form's load from its state (:func:`newton`), each update
+        within the options' step cap unless ``limit_step`` is given."""
         relax = None if self.relaxation is None else self.relaxation.relax
-        return newton(self.equations, self.opt, tolerance, curvature_below, limit_step,
-                      relax=relax)
+        return newton(self.equations, self.opt, tolerance, curvature_below,
+                      limit_step or self.step_cap, relax=relax)
 
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (:meth:`MixedEquations.release_linear_solver`)."""
@@ -100,7 +107,7 @@ class NewtonSolver:
                                            if curvature_below is None else curvature_below))
         sol.newton_results.append(res)
         if res.converged:
-            pen = self.equations.max_penetration() if form.point_contacts else 0.0
+            pen = self.equations.max_penetration() if form.contacts_present else 0.0
             sol.steps.append(StepRecord(t, res.iterations, 0, res.norm, pen))
             sol.converged = True
         else:
@@ -141,15 +148,19 @@ class LoadRamp:
         ramp = self.opt.ramp
         self.control = StepControl(cut=ramp.cut, grow=ramp.grow,
                                    fast_iterations=ramp.fast_iterations,
-                                   min_step=ramp.min_step)
+                                   min_step=ramp.min_step, slide=ramp.slide)
         self.predictor: Predictor | None = None
         self.bar: LoadBar | None = None
+        #: the motion that sizes the steps (option ``ramp.slide``)
+        self.slide = Slide(self.form) if ramp.slide > 0 else None
 
     def switch(self, solver: NewtonSolver) -> None:
         """Go on with ``solver`` (another form: a rezoned mesh), without a predictor."""
         self.solver = solver
         self.form, self.state = solver.form, solver.state
         self.predictor = None
+        if self.slide is not None:
+            self.slide = Slide(self.form)
 
     def begin(self) -> tuple[float, float, Solution]:
         """``(t, dt, sol)`` from ``start_load`` and ``steps``, or from the restart file
@@ -180,7 +191,7 @@ class LoadRamp:
         form, opt, state = self.form, self.opt, self.state
         sol_results = self.sol.newton_results
         form.set_load(t)
-        if self.predictor is not None:
+        if self.predictor is not None and opt.ramp.predictor:
             increment, last_dt = self.predictor
             state.x.data = last.x + (dt / last_dt) * increment
             form.set_load(t)  # exact prescribed values over the predictor
@@ -189,26 +200,30 @@ class LoadRamp:
         res = self.solver.newton(tol)
         sol_results.append(res)
         its = res.iterations
-        if not res.converged and self.predictor is not None:
+        if not res.converged and self.predictor is not None and opt.ramp.predictor:
             state.restore(last, multipliers=False)
             form.set_load(t)
             res = self.solver.newton(tol)
             sol_results.append(res)
             its += res.iterations
-        return Tried(res.converged, its, res)
+        motion = None
+        if res.converged and self.slide is not None:
+            motion = self.slide(last.x.FV().NumPy(), state.x.FV().NumPy())
+        return Tried(res.converged, its, res, motion)
 
     def accept(self, t: float, dt: float, last: Snapshot, tried: Tried,
                sol: Solution) -> None:
         """Record the step to ``t``; the increment from ``last`` is the next predictor."""
         state = self.state
-        pen = self.solver.equations.max_penetration() if self.form.point_contacts else 0.0
+        pen = self.solver.equations.max_penetration() if self.form.contacts_present else 0.0
         increment = state.x.CreateVector()
         increment.data = state.x - last.x
         self.predictor = (increment, dt)
         self.bar.at(t)
         sol.steps.append(StepRecord(t, tried.iterations, 0, tried.result.norm, pen))
-        log.info("  load %.4f: %d Newton iterations, |R| = %.2e", t, tried.iterations,
-                 tried.result.norm)
+        log.info("  load %.4f: %d Newton iterations, |R| = %.2e%s", t, tried.iterations,
+                 tried.result.norm, "" if tried.motion is None
+                 else f", moved {tried.motion:.2f} element sizes")
 
     def rejected(self, t: float, dt: float, tried: Tried, sol: Solution) -> bool:
         """The step to ``t + dt`` failed: the hook ``stop_on_failure`` may stop here."""
@@ -260,7 +275,8 @@ def check_feasible(eq: MixedEquations) -> None:
     problem = form.problem
     if problem.traction_free_boundaries():
         return
-    free_contact = sum(pc.free_measure(0.01 * form.h) for pc in form.point_contacts)
+    free_contact = sum(pc.free_measure(0.01 * form.h)
+                       for pc in [*form.point_contacts, *form.penalty_contacts])
     if free_contact > 1e-9 * solver.length ** (problem.dim - 1):
         return
     added = float(ngs.Integrate(form.Js - 1, problem.mesh))

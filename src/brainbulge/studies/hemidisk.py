@@ -48,7 +48,7 @@ from brainbulge.results.present.figures import (
     plot_side_by_side,
 )
 from brainbulge.results.records.run_record import atomic_output, atomic_write_json
-from brainbulge.solver import Rezoning, Solution, SolverOptions, Strategy, solve
+from brainbulge.solver import MixedForm, Rezoning, Solution, SolverOptions, Strategy, solve
 from brainbulge.studies.runner import stopped_summary
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
@@ -88,9 +88,9 @@ def run_hemidisk(
     out_dir.mkdir(parents=True, exist_ok=True)
     problem = hemidisk_problem(case)
     geo = case.geometry
-    options = SolverOptions(steps=case.steps, progress=progress)
+    options = case.solver_options(progress)
     rezoning = None
-    if case.rezone:  # how the deformed domain is meshed afresh (the solver decides when)
+    if case.rezone and not case.rounded:  # how the deformed domain is meshed afresh (the solver decides when)
         rim_h = case.rim_h
         rezoning = Rezoning(lambda mesh: hemidisk_problem(case, mesh), geo.project,
                             case.mesh_size * case.R, case.corner_h, geo.singular_points(),
@@ -112,7 +112,7 @@ def run_hemidisk(
     summary["swelling_area_ratio_expected"] = _expected_area_ratio(case)
     vf = vertex_fields(form, centre, gradient=G)
     x = vf.points[:, :2] + vf.point_data["u"][:, :2]  # deformed vertex positions
-    summary["max_skull_crossing"] = case.skull_arc.crossing(x)
+    summary["max_skull_crossing"] = skull_crossing(case, form, x)
     add_contact_fields(vf, form)
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
@@ -126,6 +126,30 @@ def run_hemidisk(
             f"{stopped_message(case, sol)}; partial "
             f"results (up to Js = {js:.3f}) in {out_dir}")
     return summary
+
+
+#: points per boundary segment at which the deformed arc is checked against the skull
+CROSSING_SAMPLES = 8
+
+
+def skull_crossing(case: HemidiskCase, form: MixedForm, x: np.ndarray) -> float:
+    """``max_skull_crossing`` [length]: how far the deformed tissue reaches into the skull.
+    On a rounded edge, the largest ``max(-g, 0)`` of the rounded skull's signed distance over
+    the deformed arc (``skull`` and ``opening``, :data:`CROSSING_SAMPLES` points per segment:
+    between the contact's Gauss points, and the end face included); on the paper's sharp
+    edge, the largest ``|x| - R`` of the deformed vertices ``x`` (n, 2) where the skull is."""
+    import ngsolve as ngs
+
+    mesh = form.mesh
+    if not case.rounded:
+        return case.skull_arc.crossing(x)
+    rule = ngs.IntegrationRule([((k + 0.5) / CROSSING_SAMPLES, 0.0, 0.0)
+                                for k in range(CROSSING_SAMPLES)],
+                               [1.0 / CROSSING_SAMPLES] * CROSSING_SAMPLES)
+    pts = mesh.MapToAllElements(rule, mesh.Boundaries("skull|opening"))
+    x = np.asarray(ngs.CF((ngs.x + form.u[0], ngs.y + form.u[1]))(pts)).reshape(-1, 2)
+    g = case.obstacle.gap_numpy(x)
+    return float(max(np.max(-g, initial=0.0), 0.0)) + 0.0
 
 
 #: why a hemidisk ramp stops on the skull's rounded cut edge (docs/design.md, Rezoning)

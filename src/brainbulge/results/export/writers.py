@@ -87,7 +87,8 @@ def vertex_fields(
 def add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
     """Point data ``contact_pressure`` [kPa] and ``contact_status`` (1 in contact with the
     obstacle, 0 separated from it, -1 off the contact boundaries: clamped base, 3D flap,
-    interior). Exact multipliers of the active-set contacts; empty fields without them."""
+    interior): the exact multipliers of the active-set contacts, the penalty's
+    ``kappa max(-g, 0)`` of the penalty contacts; empty fields without contacts."""
     status = -np.ones(len(vf.points))
     pressure = np.zeros(len(vf.points))
     for pc in form.point_contacts:
@@ -96,6 +97,10 @@ def add_contact_fields(vf: VertexFields, form: MixedForm) -> None:
         touching = (pc.lam[:nv] > 0) | (np.abs(pc.g[:nv]) < 1e-6 * form.h)
         status[pc.vertices] = touching.astype(float)
         pressure[pc.vertices] = pc.pressure()[:nv]
+    for pen in form.penalty_contacts:  # in contact: pressed into the obstacle, or on it
+        g, p = pen.at_vertices()
+        status[pen.vertices] = (g < 1e-6 * form.h).astype(float)
+        pressure[pen.vertices] = p
     vf.point_data["contact_pressure"] = pressure
     vf.point_data["contact_status"] = status
 

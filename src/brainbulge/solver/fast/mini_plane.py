@@ -281,8 +281,9 @@ class PlaneMiniTangent(MiniTangent):
 
 def applies(form) -> bool:  # noqa: ANN001 - MixedForm
     """Whether :class:`PlaneMiniTangent` computes this form's residual and tangent: 2D MINI,
-    every region Mooney-Rivlin (the contact terms are added by Newton)."""
-    return (form.element == "mini" and form.dim == 2
+    every region Mooney-Rivlin, no contact in the energy (the contact points' terms are
+    added by Newton)."""
+    return (form.element == "mini" and form.dim == 2 and not form.penalty_contacts
             and all(isinstance(m, MooneyRivlin) for m in form.problem.materials.values()))
 
 
