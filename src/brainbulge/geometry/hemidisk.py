@@ -28,7 +28,6 @@ from netgen.occ import Circle, Glue, MoveTo, OCCGeometry
 
 from brainbulge.errors import InputError
 
-
 #: the arc is refined to the edge's mesh size this far [deg] to either side of an opening's
 #: edge: the tissue next to the edge slides 10-35 edge elements of ``rho/3`` under the skull
 #: and wraps the rounding into the opening (alpha 80, beta 30-120, Js 1.2)

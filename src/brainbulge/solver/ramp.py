@@ -12,7 +12,8 @@ once more from the last converged state. A step that still
 fails is cut, ``dt <- cut dt``, and retried from the last converged state; a step that
 converged within ``fast_iterations`` lets the next grow, ``dt <- grow dt`` (``options.ramp``:
 0.5, 4 and 1.5), or, with ``slide``, the next step is sized by how far the last one moved
-the vertices in their element sizes (:class:`~brainbulge.solver.step_bounds.Slide`). The ramp stops with a :class:`Failure` (the load, the step, the last Newton
+the vertices in their element sizes (:class:`~brainbulge.solver.step_bounds.Slide`). The
+ramp stops with a :class:`Failure` (the load, the step, the last Newton
 attempt's residual, iterations and reason, and where its force residual peaked) when the
 step would fall below ``min_step``, and early when a stop hook of :class:`SolverOptions` says
 so. Below full load Newton converges only to ``intermediate_tolerance``. After every accepted

@@ -48,7 +48,7 @@ from brainbulge.results.present.figures import (
     plot_side_by_side,
 )
 from brainbulge.results.records.run_record import atomic_output, atomic_write_json
-from brainbulge.solver import MixedForm, Rezoning, Solution, SolverOptions, Strategy, solve
+from brainbulge.solver import MixedForm, Rezoning, Solution, Strategy, solve
 from brainbulge.studies.runner import stopped_summary
 
 SECTOR_ALPHAS = (20.0, 40.0, 60.0, 80.0)
@@ -90,7 +90,9 @@ def run_hemidisk(
     geo = case.geometry
     options = case.solver_options(progress)
     rezoning = None
-    if case.rezone and not case.rounded:  # how the deformed domain is meshed afresh (the solver decides when)
+    # how the deformed domain is meshed afresh (the solver decides when); the resolved edge
+    # needs no rezoning
+    if case.rezone and not case.rounded:
         rim_h = case.rim_h
         rezoning = Rezoning(lambda mesh: hemidisk_problem(case, mesh), geo.project,
                             case.mesh_size * case.R, case.corner_h, geo.singular_points(),
