@@ -20,14 +20,14 @@ def _solve(**kw):
     case = HemidiskCase(**kw)
     problem = hemidisk_problem(case)
     form = MixedForm(problem)
-    solver = NewtonSolver(form, SolverOptions(steps=kw.get("steps", 4)))
+    solver = NewtonSolver(form, case.solver_options())
     sol = solver.solve()
     return case, problem, form, solver, sol
 
 
 @pytest.fixture(scope="module")
 def noslip():
-    return _solve(contact="noslip", mesh_size=0.1)
+    return _solve(contact="noslip", mesh_size=0.1, skull_edge_radius=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +37,7 @@ def noslip_rigid():
 
 @pytest.fixture(scope="module")
 def sliding():
-    return _solve(contact="sliding", skull="rigid", mesh_size=0.05)
+    return _solve(contact="sliding", skull="rigid", mesh_size=0.1)
 
 
 def test_mesh_regions_and_boundaries() -> None:
@@ -189,8 +189,8 @@ def test_noslip_opening_stays_out_of_the_skull(noslip_rigid) -> None:
     on_opening = q(mesh.BoundaryCF({"opening": 1}, default=0)) > 0.5
     x = q(ngs.CF((ngs.x, ngs.y)) + form.u)[on_opening]
     gap, _ = case.obstacle.gap_and_normal(x)
-    assert gap.min() > -1e-2 * case.R  # between contact points: ~h^2 / edge radius
-    assert solver.equations.max_penetration() < 1e-8 * case.R  # at the contact points
+    assert gap.min() > -1e-3 * case.R  # the penalty's: pressure / kappa
+    assert solver.equations.max_penetration() < 1e-3 * case.R  # at its Gauss points
     assert np.any(gap < 1e-6 * case.R)  # and it does touch the cut edge
 
 
@@ -209,11 +209,11 @@ def test_mirror_symmetry(noslip) -> None:
 
 def test_sliding_contact(sliding) -> None:
     """Rigid skull: where the skull pushes, the boundary stays on the circle (penetration
-    < 1e-4 R), the contact pressure is compressive only, and tissue slides (tangential
-    motion)."""
+    < 1e-3 R: the penalty's pressure / kappa), the contact pressure is compressive only, and
+    tissue slides (tangential motion)."""
     case, problem, form, solver, sol = sliding
     assert sol.converged
-    assert solver.equations.max_penetration() < 1e-4 * case.R
+    assert solver.equations.max_penetration() < 1e-3 * case.R  # pressure / kappa
     mesh = problem.mesh
     q = quadrature_points(mesh, order=4, boundary=True)
     skull_part = q(mesh.BoundaryCF({"skull": 1}, default=0)) > 0.5
@@ -224,10 +224,10 @@ def test_sliding_contact(sliding) -> None:
     assert pressed.sum() > 10
     # pressed points lie on the skull's surface: the circle, or its rounded cut edge where
     # tissue has slid past the opening's corner
-    assert np.abs(q(form.gap())[pressed]).max() < 1e-4
+    assert np.abs(q(form.gap())[pressed]).max() < 1e-3
     on_circle = pressed & (np.abs(np.arctan2(x[:, 1], x[:, 0]) - np.pi / 2) > np.radians(35))
     assert on_circle.sum() > 5
-    assert np.abs(r[on_circle] - case.R).max() < 1e-4
+    assert np.abs(r[on_circle] - case.R).max() < 1e-3
     assert np.all(pc >= 0)
     # frictionless: the tissue slides towards the opening along the skull
     t = np.stack([-q.X[:, 1], q.X[:, 0]], axis=1) / case.R
@@ -324,8 +324,8 @@ def test_contact_fields_in_the_output(sliding) -> None:
     pressed = arc & (status == 1)
     assert pressed.sum() > 0.5 * arc.sum()
     assert np.all(p[~arc & ~on_base] == 0)  # interior vertices carry no contact pressure
-    # the exact nodal multipliers' force per area; the 2D skull's gap is a distance
-    # (|grad g| = 1), so that is the multiplier itself
-    pc = form.point_contacts[0]
-    np.testing.assert_array_equal(p[pc.vertices], pc.pressure()[: len(pc.vertices)])
-    np.testing.assert_allclose(p[pc.vertices], pc.lam[: len(pc.vertices)], rtol=1e-12)
+    # the penalty's kappa max(-g, 0) at the vertices: kappa times how far each is pressed in
+    (pen,) = form.penalty_contacts
+    g, _ = pen.at_vertices()
+    np.testing.assert_allclose(p[pen.vertices], pen.kappa * np.maximum(-g, 0.0), rtol=1e-12)
+    assert np.all(status[pen.vertices][g < 0] == 1)

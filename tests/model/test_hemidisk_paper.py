@@ -15,7 +15,7 @@ from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
 
 def _solve(**kw):
-    case = HemidiskCase(**kw)
+    case = HemidiskCase(skull_edge_radius=0.0, **kw)  # the sharp edge
     problem = hemidisk_problem(case)
     form = MixedForm(problem, element=case.element)
     sol = NewtonSolver(form, SolverOptions(steps=case.steps)).solve()
@@ -75,10 +75,10 @@ def test_crossing_is_the_reach_beyond_the_arc() -> None:
 
 def test_paper_problem_has_no_obstacle_on_the_opening() -> None:
     """No-slip: the arc clamped, nothing else; sliding: contact on the skull arc only."""
-    noslip = hemidisk_problem(HemidiskCase(contact="noslip", mesh_size=0.3))
+    noslip = hemidisk_problem(HemidiskCase(contact="noslip", mesh_size=0.3, skull_edge_radius=0.0))
     assert noslip.clamped == "base|skull" and noslip.contacts == []
     assert noslip.traction_free_boundaries() == ["opening"]
-    sliding = hemidisk_problem(HemidiskCase(contact="sliding", mesh_size=0.3))
+    sliding = hemidisk_problem(HemidiskCase(contact="sliding", mesh_size=0.3, skull_edge_radius=0.0))
     assert [c.boundary for c in sliding.contacts] == ["skull"]
     assert isinstance(sliding.contacts[0].obstacle, SkullArc2D)
     assert sliding.traction_free_boundaries() == ["opening"]

@@ -85,7 +85,8 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1)
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1, skull_edge_radius=0.0,
+                        skull_edge_radius=0.0)
     geo = case.geometry
     solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
     sol = solver.solve()
@@ -115,7 +116,7 @@ def test_points_know_their_region() -> None:
     from brainbulge.results.measures.summary import point_fields
     from brainbulge.solver import MixedForm
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, mesh_size=0.1)
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, mesh_size=0.1, skull_edge_radius=0.0)
     form = MixedForm(hemidisk_problem(case))
     mesh = form.mesh
     regions = sorted(set(mesh.GetMaterials()))
@@ -140,7 +141,8 @@ def test_argmax_locations_carry_their_maxima_outside_the_exclusion_disks() -> No
     from brainbulge.results.measures.summary import solution_summary
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2,
+                        skull_edge_radius=0.0)
     corners = case.geometry.singular_points()
     form = MixedForm(hemidisk_problem(case))
     solver = NewtonSolver(form, SolverOptions(steps=2))
@@ -253,7 +255,7 @@ def test_mini_outputs_are_those_of_its_p1_part() -> None:
     from brainbulge.results.measures.quadrature import quadrature_points
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1,
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1, skull_edge_radius=0.0,
                         element="mini")
     form = MixedForm(hemidisk_problem(case), element="mini")
     assert NewtonSolver(form, SolverOptions(steps=2)).solve().converged

@@ -9,8 +9,8 @@ import pytest
 from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
-CASE = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="sliding", skull="rigid",
-                    mesh_size=0.15)
+CASE = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="sliding", mesh_size=0.15,
+                    skull_edge_radius=0.0)
 
 
 class Stop(Exception):

@@ -257,7 +257,8 @@ def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
     ``tolerance``: fewer iterations, the same final state (hyperelastic: path independent)."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1)
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1,
+                        skull_edge_radius=0.0)
     sols = []
     for itol in (1e-9, 1e-5):
         form = MixedForm(hemidisk_problem(case))
@@ -294,7 +295,8 @@ def test_an_attempt_that_stagnates_stops_early() -> None:
     (here until the line search finds no step at all)."""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2)
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.2,
+                        skull_edge_radius=0.0)
     runs = {}
     for stagnation in (4, 0):
         form = MixedForm(hemidisk_problem(case))

@@ -97,7 +97,8 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
     from brainbulge.model.hemidisk import HemidiskCase
     from brainbulge.solver.options import DIVERGENCE_ADVICE, Failure, Solution
 
-    case = HemidiskCase(alpha=80, beta=30, contact="sliding", skull="rigid")
+    case = HemidiskCase(alpha=80, beta=30, contact="sliding", skull="rigid",
+                        skull_edge_radius=0.05)
     skull = case.obstacle
     centres = skull.edge_centres()
     half = np.radians(15.0)

@@ -25,7 +25,8 @@ from closed_forms import (
 
 
 def _form(contact: str = "sliding", element: str = "mini") -> MixedForm:
-    case = HemidiskCase(contact=contact, mesh_size=0.1, element=element)
+    case = HemidiskCase(contact=contact, mesh_size=0.1, element=element,
+                        skull_edge_radius=0.0)
     return MixedForm(hemidisk_problem(case), element=element)
 
 

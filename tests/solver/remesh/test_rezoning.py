@@ -21,7 +21,8 @@ def test_rezoning_keeps_the_solution() -> None:
     """Rezoning after every load step (forced by an unreachable quality bound) changes the
     mesh, not the problem: the same displacements as on the fixed mesh, within the
     discretisation error, and ``J = Js`` on the final, rezoned mesh."""
-    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1)
+    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1,
+                        skull_edge_radius=0.0)
     geo = case.geometry
     fixed = MixedForm(hemidisk_problem(case))
     assert NewtonSolver(fixed, SolverOptions(steps=4)).solve().converged
@@ -56,7 +57,8 @@ def test_start_load_is_checked() -> None:
 def test_a_failed_rezoning_goes_on_without_it() -> None:
     """A rezoning that fails (here: the projection refuses) leaves the old mesh's converged
     state, and the ramp goes on there to full load, as without rezoning."""
-    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1)
+    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1,
+                        skull_edge_radius=0.0)
     geo = case.geometry
 
     def refuse(label: str, X: np.ndarray) -> np.ndarray:
@@ -74,7 +76,8 @@ def test_a_failed_rezoning_goes_on_without_it() -> None:
 def test_stop_hooks_keep_the_last_converged_state() -> None:
     """``stop_on_failure`` ends the ramp at the last converged load instead of cutting the
     step; ``stop_when`` after an accepted step. Both keep that state."""
-    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1)
+    case = HemidiskCase(alpha=80, beta=60, contact="noslip", mesh_size=0.1,
+                        skull_edge_radius=0.0)
     asked: list[float] = []
 
     def stop(t: float) -> bool:

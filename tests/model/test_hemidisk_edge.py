@@ -1,0 +1,111 @@
+"""The skull's rounded edge in 2D (the default, docs/model.md section 10): one penalty contact
+on the whole arc against the rounded skull, the arc resolved at the edge."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from brainbulge.geometry.ngsolve_arrays import vertex_coordinates
+from brainbulge.geometry.skull2d import RigidSkull2D
+from brainbulge.model.hemidisk import PAPER_SKULL_THICKNESS, HemidiskCase, hemidisk_problem
+from brainbulge.solver import MixedForm, NewtonSolver
+from brainbulge.studies.hemidisk import skull_crossing
+
+
+def _solve(**kw):
+    case = HemidiskCase(**kw)
+    form = MixedForm(hemidisk_problem(case), element=case.element)
+    sol = NewtonSolver(form, case.solver_options()).solve()
+    assert sol.converged, sol.message
+    X = vertex_coordinates(form.mesh)
+    x = X + np.array([form.u(form.mesh(*p)) for p in X])
+    return case, form, X, x
+
+
+@pytest.fixture(scope="module")
+def sliding():
+    return _solve(contact="sliding")
+
+
+@pytest.fixture(scope="module")
+def noslip():
+    return _solve(contact="noslip")
+
+
+def test_the_default_skull_is_rounded_and_in_contact_on_the_whole_arc() -> None:
+    """The paper's skull with its edge rounded by 0.03 R, thick beyond any bulge; sliding:
+    one contact on the skull arc and the opening; no-slip: the skull arc clamped, the
+    opening in contact (with the rounding and the end face)."""
+    case = HemidiskCase(mesh_size=0.3)
+    assert case.rounded and case.skull_edge_radius == 0.03
+    skull = case.obstacle
+    assert isinstance(skull, RigidSkull2D)
+    assert skull.edge_radius == 0.03 and skull.thickness == PAPER_SKULL_THICKNESS
+    sliding = hemidisk_problem(case)
+    assert [(c.boundary, c.penalty is not None) for c in sliding.contacts] == [
+        ("skull|opening", True)]
+    noslip = hemidisk_problem(HemidiskCase(mesh_size=0.3, contact="noslip"))
+    assert noslip.clamped == "base|skull"
+    assert [c.boundary for c in noslip.contacts] == ["opening"]
+
+
+def _corner(X: np.ndarray, x: np.ndarray, deg: float) -> tuple[float, float]:
+    """The deformed angle [deg] and radius of the material point at rest on the arc at
+    ``deg``."""
+    t = math.radians(deg)
+    i = int(np.argmin(np.linalg.norm(X - [math.cos(t), math.sin(t)], axis=1)))
+    return math.degrees(math.atan2(x[i, 1], x[i, 0])), float(np.linalg.norm(x[i]))
+
+
+def test_sliding_tissue_slides_past_the_edge_and_turns_outward(sliding) -> None:
+    """The paper's sliding statement: the tissue slides along the skull and rotates outward
+    around the opening's edge. The material corners (at rest on the edges, 60 and 120 deg)
+    end inside the opening (> 1 deg) and outside the circle (> 0.01 R); the tissue never
+    enters the skull by more than 1e-3 R (the rounding and the end face included)."""
+    case, form, X, x = sliding
+    for edge, inward in ((120.0, -1.0), (60.0, 1.0)):
+        angle, r = _corner(X, x, edge)
+        assert inward * (angle - edge) > 1.0
+        assert r > case.R + 0.01
+    assert skull_crossing(case, form, x) < 1e-3 * case.R
+
+
+def test_noslip_skull_arc_is_fixed_and_the_opening_stays_out(noslip) -> None:
+    """No-slip: the skull arc's vertices do not move; the opening's tissue turns around the
+    edge without entering the skull (< 1e-3 R), and it presses on the rounding."""
+    case, form, X, x = noslip
+    r = np.linalg.norm(X, axis=1)
+    delta = np.abs(np.degrees(np.arctan2(X[:, 1], X[:, 0])) - 90)
+    skull_arc = (np.abs(r - case.R) < 1e-9) & (delta >= case.beta / 2)
+    assert np.abs(x[skull_arc] - X[skull_arc]).max() < 1e-12
+    assert skull_crossing(case, form, x) < 1e-3 * case.R
+    (pen,) = form.penalty_contacts
+    assert pen.max_penetration() > 0  # pressed on the rounding at Gauss points
+
+
+@pytest.mark.parametrize("fixture", ["noslip", "sliding"])
+def test_the_symmetric_case_stays_symmetric(fixture, request) -> None:
+    """Mirror-symmetric inputs give a mirror-symmetric solution (the full domain stays on the
+    symmetric branch), to 1 % of the largest displacement (the mesh is not symmetric)."""
+    case, form, X, x = request.getfixturevalue(fixture)
+    mesh = form.mesh
+    umax = np.abs(x - X).max()
+    for px, py in [(0.3, 0.5), (0.6, 0.2), (0.1, 0.9), (0.45, 0.85)]:
+        ur = np.asarray(form.u(mesh(px, py)))
+        ul = np.asarray(form.u(mesh(-px, py)))
+        np.testing.assert_allclose([ul[0], ul[1]], [-ur[0], ur[1]], atol=1e-2 * umax)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("contact", ["sliding", "noslip"])
+def test_top_of_bulge_converges_under_refinement(contact) -> None:
+    """The headline's top-of-bulge displacement agrees between the meshes h and h/1.5 to
+    0.5 % (the edge's mesh is set by the rounding, the rest refines)."""
+    tops = []
+    for h in (0.05, 0.05 / 1.5):
+        case, form, _, _ = _solve(contact=contact, mesh_size=h)
+        tops.append(float(form.u(form.mesh(0.0, case.R - 1e-9))[1]))
+    assert abs(tops[1] / tops[0] - 1) < 5e-3
