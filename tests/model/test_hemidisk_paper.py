@@ -78,7 +78,8 @@ def test_paper_problem_has_no_obstacle_on_the_opening() -> None:
     noslip = hemidisk_problem(HemidiskCase(contact="noslip", mesh_size=0.3, skull_edge_radius=0.0))
     assert noslip.clamped == "base|skull" and noslip.contacts == []
     assert noslip.traction_free_boundaries() == ["opening"]
-    sliding = hemidisk_problem(HemidiskCase(contact="sliding", mesh_size=0.3, skull_edge_radius=0.0))
+    sliding = hemidisk_problem(HemidiskCase(contact="sliding", mesh_size=0.3,
+                                            skull_edge_radius=0.0))
     assert [c.boundary for c in sliding.contacts] == ["skull"]
     assert isinstance(sliding.contacts[0].obstacle, SkullArc2D)
     assert sliding.traction_free_boundaries() == ["opening"]

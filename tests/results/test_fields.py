@@ -85,7 +85,7 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1, skull_edge_radius=0.0,
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1,
                         skull_edge_radius=0.0)
     geo = case.geometry
     solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
@@ -255,8 +255,8 @@ def test_mini_outputs_are_those_of_its_p1_part() -> None:
     from brainbulge.results.measures.quadrature import quadrature_points
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1, skull_edge_radius=0.0,
-                        element="mini")
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1,
+                        skull_edge_radius=0.0, element="mini")
     form = MixedForm(hemidisk_problem(case), element="mini")
     assert NewtonSolver(form, SolverOptions(steps=2)).solve().converged
     mesh = form.mesh

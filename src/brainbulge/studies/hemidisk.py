@@ -165,9 +165,9 @@ CUT_EDGE_ADVICE = (
 
 def stopped_message(case: HemidiskCase, sol: Solution) -> str:
     """Why the ramp of ``sol`` stopped, with :data:`CUT_EDGE_ADVICE` as the advice when
-    the largest unbalanced force sat at a rigid skull's rounded cut edge."""
+    the largest unbalanced force sat at the skull's rounded edge."""
     site = sol.failure_site
-    if site is None or case.skull != "rigid" or not case.obstacle.near_cut_edge(np.asarray(site)):
+    if site is None or not case.rounded or not case.obstacle.near_cut_edge(np.asarray(site)):
         return sol.describe()
     return sol.describe(CUT_EDGE_ADVICE)
 

@@ -132,8 +132,9 @@ def test_symmetric_pardiso_solves_the_hemidisk_saddle_point_without_lu() -> None
     1e-6 and LU takes over, as designed.)"""
     from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
 
-    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.04, skull_edge_radius=0.0,
-                        corner_mesh_size=0.004, rim_mesh_size=0.04)  # (no rim refinement)
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.04,
+                        skull_edge_radius=0.0, corner_mesh_size=0.004,
+                        rim_mesh_size=0.04)  # (no rim refinement)
     solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
     sol = solver.solve()
     assert sol.converged
