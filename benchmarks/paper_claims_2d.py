@@ -10,7 +10,7 @@ import numpy as np
 from paper_run import BAND, MARKED, WAITING, Row, Run, band, excess_text
 
 #: docs/model.md's section on the 2D skull, as a link from docs/paper.md
-SKULL_SECTION = "model.md#10-the-2d-skull-the-papers-arc-default-and-a-rigid-shell-extension"
+SKULL_SECTION = "model.md#10-the-2d-skull-and-its-edge"
 
 
 # --- 2D measures ------------------------------------------------------------------------
@@ -499,7 +499,8 @@ def small_strain_exponents(contact: str, corner: float) -> tuple[float, float]:
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
     case = HemidiskCase(contact=contact, mesh_size=SMALL_H, corner_mesh_size=corner,
-                        swelling=SMALL_SWELLING, steps=1, edge_exclusion=0.0)
+                        swelling=SMALL_SWELLING, steps=1, edge_exclusion=0.0,
+                        skull_edge_radius=0.0, element="mini")  # the punch's sharp edge
     form = MixedForm(hemidisk_problem(case), element=case.element)
     sol = NewtonSolver(form, SolverOptions(steps=case.steps)).solve()
     if not sol.converged:

@@ -18,7 +18,7 @@ class Stop(Exception):
 
 
 def _solver(path, key: str = "case A", stop_above: float | None = None) -> NewtonSolver:
-    form = MixedForm(hemidisk_problem(CASE))
+    form = MixedForm(hemidisk_problem(CASE), element="mini")  # the sharp edge's element
     solver = NewtonSolver(form, SolverOptions(steps=4, checkpoint=path, checkpoint_key=key))
     solver.loads = []  # the load of each Newton solve
     newton = solver.newton

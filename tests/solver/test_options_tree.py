@@ -102,6 +102,8 @@ NOT_TUNABLE = {
                                        "it is solved",
     ("fast/hotspot.py", "HEAP"): "NGSolve's local heap in bytes: memory, not numerics",
     ("fast/mini_plane.py", "QUAD_ORDER"): "the quadrature of the MINI bubble (discretisation)",
+    ("contact/penalty.py", "POINTS"): "the penalty contact's Gauss points per boundary segment "
+    "(discretisation)",
     ("fast/mini_plane.py", "NGSOLVE_ORDER"): "NGSolve's numbering of the element DOFs",
     ("fast/mini_plane.py", "_REF_GRAD"): "the reference triangle's barycentric gradients",
     ("fast/mini_kernels.py", "QUAD_POINTS"): "the tetrahedron's 4-point rule (discretisation)",
