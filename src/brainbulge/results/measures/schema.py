@@ -172,6 +172,9 @@ KEYS: tuple[Key, ...] = (
        "staircase corner of a tissue interface in 3D)"),
     _k("abs_Je_minus_1_by_region", "-", 'per region: `{"median", "p95", "raw_max"}` of '
        "\\|J/Js − 1\\|"),
+    _k("inverted_points", "-", "integration points where the element is inverted (J ≤ 0), "
+       "with a warning in the log: their stress is undefined and left out of the stress "
+       "keys (0 in a sound solution)"),
     _k(("max_abs_J_minus_Js", "raw_max_abs_J_minus_Js"), "-", "deprecated (one release): "
        "the largest \\|J − Js\\| without / with the edge points; use the keys above",
        instead=("p95_abs_Je_minus_1", "raw_max_abs_Je_minus_1")),
@@ -204,12 +207,13 @@ KEYS: tuple[Key, ...] = (
        cases=_H),
     _k("singular_points", "R", "their centres: the opening's corners and, for a sector, "
        "where its edges meet the arc and the centre of the base", cases=_H),
-    _k("max_skull_crossing", "R", "the largest \\|x\\| − R > 0 of the deformed vertices "
-       "at an angle the skull covers (outside the opening), 0 when none: tissue where the "
-       "rigid skull is. No-slip: the bulge folding back over the skull's edge; sliding: the "
-       "opening's free surface next to the edge crossing the arc (only the skull-side "
-       "boundary is held on it), which `max_penetration` (of the held boundary) does not "
-       "see", cases=_H, labels=("skull crossing",), fmt=".2g"),
+    _k("max_skull_crossing", "R", "how far the deformed tissue reaches into the skull, 0 "
+       "when nowhere. Rounded edge: the deepest point of the deformed arc (8 points per "
+       "segment, the end face included) inside the rounded skull. Sharp edge: the largest "
+       "\\|x\\| − R > 0 of the deformed vertices where the skull is (the bulge folding "
+       "back over the edge, or the opening's surface next to it crossing the arc, which "
+       "`max_penetration` of the held arc does not see)", cases=_H,
+       labels=("skull crossing",), fmt=".3g"),
     # --- the brain's
     _k("swelling_reached", "-", "the white-matter Js reached", cases=_B, labels=("Js",),
        fmt=".3f"),

@@ -23,6 +23,7 @@ percentiles with the mesh. ``J`` and the constraint statistics use the solution'
 from __future__ import annotations
 
 import dataclasses
+import logging
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +36,8 @@ from brainbulge.results.measures.quadrature import QuadraturePoints, quadrature_
 from brainbulge.results.measures.recovery import recovered_gradient
 from brainbulge.results.measures.schema import CSF, EXTREMES, PERCENTILES, stem_key
 from brainbulge.solver.options import Solution
+
+log = logging.getLogger("brainbulge")
 
 
 def away_from(X: np.ndarray, points: list[tuple[float, ...]], radius: float) -> np.ndarray:
@@ -58,7 +61,8 @@ def field_extremes(
             continue
         v = fields[name]
         for kind in kinds:
-            f = np.argmax if kind == "max" else np.argmin
+            # (an inverted point, J <= 0, has no stress: NaN there, left out)
+            f = np.nanargmax if kind == "max" else np.nanargmin
             i_raw = int(f(v))
             out[stem_key(f"raw_{kind}", stem, prefix)] = float(v[i_raw])
             if keep.any():
@@ -148,12 +152,16 @@ def field_percentiles(
         if name not in fields:
             continue
         v = np.asarray(fields[name], dtype=float)[keep]
+        ok = ~np.isnan(v)  # (an inverted point has no stress: left out)
+        v, wv = v[ok], w[ok]
+        if not len(v):
+            continue
         for kind in kinds:
             qs = PERCENTILES[kind]
-            for q, x in zip(qs, weighted_percentiles(v, w, qs), strict=True):
+            for q, x in zip(qs, weighted_percentiles(v, wv, qs), strict=True):
                 out[stem_key(f"p{q:02d}", stem, prefix)] = float(x)
             if kind == "max" and peak_volume is not None:
-                out[stem_key("peak", stem, prefix)] = exceeded_in(v, w, peak_volume)
+                out[stem_key("peak", stem, prefix)] = exceeded_in(v, wv, peak_volume)
     return out
 
 
@@ -325,6 +333,10 @@ def solution_summary(
                 out.update(field_percentiles(sub, q.weights[sel], keep[sel], prefix,
                                              peak_volume))
     out.update(constraint_statistics(J, Js, q.weights, points.region, points.region_names))
+    out["inverted_points"] = inverted = int(np.count_nonzero(J <= 0))
+    if inverted:
+        log.warning("%d integration point(s) inverted (J <= 0): the stress is undefined there "
+                    "and left out of the stress extremes", inverted)
     out["raw_max_abs_J_minus_Js"] = float(np.max(np.abs(J - Js)))
     out["max_abs_J_minus_Js"] = float(np.max(np.abs(J - Js)[keep])) if keep.any() else None
     out["integral_J_minus_Js"] = float(np.sum((J - Js) * q.weights))
