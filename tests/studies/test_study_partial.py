@@ -118,6 +118,11 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
         sol = stopped(elsewhere)
         assert hd.stopped_message(case, sol) == sol.message
         assert sol.message.endswith(DIVERGENCE_ADVICE)
+    # Taylor-Hood sliding on the sharp edge: take MINI there
+    sharp = HemidiskCase(contact="sliding", skull_edge_radius=0.0, element="taylor-hood")
+    assert hd.stopped_message(sharp, stopped(None)).endswith(hd.SHARP_EDGE_ADVICE)
+    mini = HemidiskCase(contact="sliding", skull_edge_radius=0.0, element="mini")
+    assert hd.stopped_message(mini, stopped(None)).endswith(DIVERGENCE_ADVICE)
 
 
 def test_sector_study_starts_large_sectors_in_narrow_openings_first() -> None:

@@ -163,10 +163,20 @@ CUT_EDGE_ADVICE = (
 )
 
 
+#: why Taylor-Hood stops sliding on the sharp edge (docs/model.md section 10)
+SHARP_EDGE_ADVICE = (
+    "On the sharp edge (--skull-edge-radius 0) Taylor-Hood's edge element next to the corner "
+    "is squeezed along the arc; take --element mini there, or round the edge"
+)
+
+
 def stopped_message(case: HemidiskCase, sol: Solution) -> str:
     """Why the ramp of ``sol`` stopped, with :data:`CUT_EDGE_ADVICE` as the advice when
-    the largest unbalanced force sat at the skull's rounded edge."""
+    the largest unbalanced force sat at the skull's rounded edge, and
+    :data:`SHARP_EDGE_ADVICE` for Taylor-Hood sliding on the sharp edge."""
     site = sol.failure_site
+    if not case.rounded and case.element == "taylor-hood" and case.contact == "sliding":
+        return sol.describe(SHARP_EDGE_ADVICE)
     if site is None or not case.rounded or not case.obstacle.near_cut_edge(np.asarray(site)):
         return sol.describe()
     return sol.describe(CUT_EDGE_ADVICE)
