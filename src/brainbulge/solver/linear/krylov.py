@@ -195,6 +195,9 @@ class BlockKrylovSolver:
         """Build the AMG hierarchies (displacement block, and the Schur approximation);
         ``blocks``: :meth:`_blocks` of ``K`` if already cut."""
         t0 = time.perf_counter()
+        self._ready = False
+        self.amg_p.ml = None  # the hierarchies made before are not kept while new ones are
+        # built (the displacement one is dropped by its setup)
         a_diag, Bt, C = self._blocks(K) if blocks is None else blocks
         self.amg_u.setup(K)
         self.amg_p.setup(self.schur_matrix(a_diag, Bt, C))
