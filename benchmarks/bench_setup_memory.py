@@ -66,10 +66,10 @@ def outputs(peaks: PhasePeaks, case, bm, skull, form, state: Path | None, out: s
     displacement that of ``state`` (a ``fields.npz``) or zero; each part a stage."""
     import brainbulge.studies.craniectomy as craniectomy
     from brainbulge.geometry.ngsolve_arrays import vertex_dofs
-    from brainbulge.heap import release_free_memory
     from brainbulge.solver.options import Solution, StepRecord
+    from brainbulge.solver.strategy import free_solver_memory
 
-    release_free_memory()  # as the solver's release before the outputs
+    free_solver_memory()  # as after a solve
     form.set_load(1.0)
     x = form.gfu.components[0].vec.FV().NumPy()
     x[:] = 0.0
