@@ -10,7 +10,7 @@ resident memory is measured on its own: the kernel's high-water mark (``VmHWM``)
         [--outputs [--state RUN/fields.npz]]
 
 Stages: the label image (the ICBM152 template), the intracranial envelope, Netgen's tets
-(in a forked child: its own peak is printed below the table), the tissue tags and the
+(in a forked child, whose own memory is not in the table), the tissue tags and the
 interfaces' fit (on the Netgen mesh), the uniform refinement, the labelled mesh (sides,
 outer faces, base, flaps), the case's flap and skull, the NGSolve mesh, the problem (spaces
 and regions), the mixed form, the Newton solver (the closed-form tangent's set-up) and the
@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import resource
 import tempfile
 import tracemalloc
 from pathlib import Path
@@ -192,8 +191,6 @@ def main() -> None:
     print(peaks.table())
     if summary is not None:
         print("summary:", {k: summary[k] for k in SUMMARY_KEYS})
-    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    print(f"Netgen's forked child: peak {child:,.0f} MB")
 
 
 if __name__ == "__main__":
