@@ -201,9 +201,8 @@ def constraint_statistics(J: np.ndarray, Js: np.ndarray, weights: np.ndarray,
 
 
 #: integration points evaluated at a time: the (n, 3, 3) tensors behind the fields of one
-#: chunk take ~75 MB; all 21.6M points of a 1.54M-tet brain at once took several GB more than
-#: the Newton solve itself (the run's peak memory was in this stage), chunks of 1M points
-#: ~0.3 GB
+#: chunk take ~75 MB (~0.3 GB in chunks of 1M points); all 21.6M points of a 1.54M-tet brain
+#: at once took several GB more than the Newton solve itself
 CHUNK = 250_000
 
 

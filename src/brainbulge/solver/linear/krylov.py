@@ -197,8 +197,8 @@ class BlockKrylovSolver:
         ``blocks``: :meth:`_blocks` of ``K`` if already cut."""
         t0 = time.perf_counter()
         self._ready = False
-        self.amg_p.ml = None  # the hierarchies made before are not kept while new ones are
-        # built (the displacement one is dropped by its setup)
+        self.amg_p.ml = None  # no old hierarchy kept while new ones are built (the
+        # displacement one is dropped by AMGCycle.setup)
         a_diag, Bt, C = self._blocks(K) if blocks is None else blocks
         self.amg_u.setup(K)
         self.amg_p.setup(self.schur_matrix(a_diag, Bt, C))
