@@ -108,6 +108,41 @@ def test_summary_is_the_same_when_evaluated_in_chunks(monkeypatch) -> None:
     assert chunked["abs_Je_minus_1_by_region"] == whole["abs_Je_minus_1_by_region"]
 
 
+def test_tissue_summary_reads_the_fields_one_copy_at_a_time(monkeypatch) -> None:
+    """With ``tissue``, the extremes and percentiles of the tissue's and the CSF's points
+    are taken from fields cut out one at a time (:class:`Selected`), not from copies of
+    all fields at once: the same numbers as the copies give. The swelling target is one
+    array for ``Js`` and ``fields["Js"]``."""
+    import brainbulge.results.measures.summary as summary
+    from brainbulge.model.hemidisk import HemidiskCase, hemidisk_problem
+    from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
+
+    case = HemidiskCase(alpha=80, beta=60, swelling=1.2, contact="noslip", mesh_size=0.1)
+    solver = NewtonSolver(MixedForm(hemidisk_problem(case)), SolverOptions(steps=2))
+    sol = solver.solve()
+    assert sol.converged
+    points = summary.point_fields(sol.form, np.zeros(2))
+    assert points.Js is points.fields["Js"]
+    tissue = sorted(set(sol.form.mesh.GetMaterials()))[0]
+    sel = points.in_regions(tissue)
+    assert 0 < sel.sum() < len(sel)
+    cut = summary.Selected(points.fields, sel)
+    assert set(cut) == set(points.fields) and len(cut) == len(points.fields)
+    assert "J" in cut and "no-such-field" not in cut
+    for k, v in points.fields.items():
+        assert np.array_equal(cut[k], v[sel]), k
+
+    def run() -> dict:
+        return summary.solution_summary(sol, np.zeros(2), case.geometry.singular_points(),
+                                        0.05, tissue=tissue, points=points, peak_volume=1e-3)
+
+    lazy = run()
+    monkeypatch.setattr(summary, "Selected", lambda f, s: {k: v[s] for k, v in f.items()})
+    copied = run()
+    assert any(k.startswith("p95_csf_") for k in lazy)
+    assert lazy == copied
+
+
 def test_points_know_their_region() -> None:
     """Each sampled point's region (kept instead of NGSolve's point array) is the region
     of the element NGSolve maps it into."""

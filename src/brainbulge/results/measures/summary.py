@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
 import ngsolve as ngs
@@ -209,9 +209,31 @@ def constraint_statistics(J: np.ndarray, Js: np.ndarray, weights: np.ndarray,
 
 
 #: integration points evaluated at a time: the (n, 3, 3) tensors behind the fields of one
-#: chunk take ~0.3 GB; all 21.6M points of a 1.54M-tet brain at once took several GB more than
-#: the Newton solve itself (the run's peak memory was in this stage)
-CHUNK = 1_000_000
+#: chunk take ~75 MB (~0.3 GB in chunks of 1M points); all 21.6M points of a 1.54M-tet brain
+#: at once took several GB more than the Newton solve itself
+CHUNK = 250_000
+
+
+class Selected(Mapping):
+    """The fields ``fields`` (name -> array over the points) at the points ``sel`` (a
+    mask), each cut out when it is read: one field's copy at a time, not all of them (at a
+    1.40M-tet brain's 19.6M points a field takes 157 MB)."""
+
+    def __init__(self, fields: dict[str, np.ndarray], sel: np.ndarray) -> None:
+        self._fields = fields
+        self._sel = sel
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self._fields[name][self._sel]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._fields
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._fields)
+
+    def __len__(self) -> int:
+        return len(self._fields)
 
 
 @dataclass
@@ -255,7 +277,7 @@ def point_fields(form, centre: np.ndarray,
     G = gradient if gradient is not None else recovered_gradient(
         form.mesh, form.output_displacement())
     n = len(q.X)
-    Js, region = np.empty(n), np.empty(n, dtype=np.int16)
+    region = np.empty(n, dtype=np.int16)
     fields: dict[str, np.ndarray] = {}
     for a in range(0, n, CHUNK):  # filled in place: no second copy of the fields
         chunk = slice(a, min(a + CHUNK, n))
@@ -264,9 +286,10 @@ def point_fields(form, centre: np.ndarray,
         for k, v in f.items():
             if v.ndim == 1:
                 fields.setdefault(k, np.empty(n, dtype=v.dtype))[chunk] = v
-        Js[chunk] = s.Js
+        del s, f  # (the chunk's tensors, before the next chunk's)
         region[chunk], names = region_of_points(form.mesh, q.points[chunk])
-    return PointFields(q=dataclasses.replace(q, points=None), Js=Js, fields=fields,
+    # Js is one of the fields (output_fields gives the samples' own): one array for both
+    return PointFields(q=dataclasses.replace(q, points=None), Js=fields["Js"], fields=fields,
                        region=region, region_names=names)
 
 
@@ -328,7 +351,7 @@ def solution_summary(
         in_tissue = points.in_regions(tissue)
         for prefix, sel in (("", in_tissue), (CSF, ~in_tissue)):
             if sel.any():
-                sub = {k: v[sel] for k, v in fields.items()}
+                sub = Selected(fields, sel)
                 out.update(field_extremes(X[sel], sub, keep[sel], prefix))
                 out.update(field_percentiles(sub, q.weights[sel], keep[sel], prefix,
                                              peak_volume))

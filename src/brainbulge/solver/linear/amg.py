@@ -133,10 +133,13 @@ class AMGCycle:
         (which :meth:`update` replaces; its index arrays are the plan's), and the
         restriction is the transpose of the prolongation (``R = P^T``, a view of ``P``).
         At 495k tets they had held 46 MB of finest-level indices and a 71 MB copy of ``P``.
+        A hierarchy made before is dropped first, not kept while the new one is built (at
+        1.40M tets the displacement hierarchy holds ~1 GB; a refresh had held two).
         """
         import pyamg
         from pyamg.relaxation.smoothing import change_smoothers
 
+        self.ml = None
         ml = pyamg.smoothed_aggregation_solver(self.padded(M), B=self.B, **self._options())
         for i, lvl in enumerate(ml.levels):  # CSR products in the cycle
             lvl.A = sp.csr_matrix(lvl.A) if i else None  # (the finest's BSR freed first)
