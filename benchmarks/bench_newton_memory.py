@@ -49,6 +49,21 @@ class PhasePeaks:
             f.write("5")
         tracemalloc.reset_peak()
 
+    @classmethod
+    def start(cls, ap: argparse.ArgumentParser, first: str) -> tuple[argparse.Namespace,
+                                                                    PhasePeaks]:
+        """Parse ``ap``'s arguments (with ``--trace``), set up the runtime as the command line
+        does, start tracing when asked and the first phase ``first``."""
+        ap.add_argument("--trace", action="store_true",
+                        help="also the live memory that tracemalloc sees (slower)")
+        args = ap.parse_args()
+        configure_runtime()
+        if args.trace:
+            tracemalloc.start()
+        peaks = cls()
+        peaks.mark(first)
+        return args, peaks
+
     def mark(self, next_label: str) -> None:
         """End the current phase (its peak and end RSS), start ``next_label``."""
         t = time.perf_counter()
@@ -141,14 +156,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--mesh", type=Path, required=True, help="brain.npz of brainbulge mesh")
     ap.add_argument("--iterations", type=int, default=2, help="Newton iterations (default 2)")
-    ap.add_argument("--trace", action="store_true",
-                    help="also the live memory that tracemalloc sees (slower)")
-    args = ap.parse_args()
-    configure_runtime()
-    if args.trace:
-        tracemalloc.start()
-    peaks = PhasePeaks()
-    peaks.mark("problem")
+    args, peaks = PhasePeaks.start(ap, "problem")
 
     from brainbulge.model.brain import brain_mesh_for, brain_problem, case_skull
     from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions

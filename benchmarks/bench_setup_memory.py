@@ -33,13 +33,11 @@ from __future__ import annotations
 import argparse
 import hashlib
 import tempfile
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
 
 from bench_newton_memory import PhasePeaks
-from brainbulge.runtime import configure as configure_runtime
 
 
 class FirstNewton(Exception):
@@ -103,14 +101,7 @@ def main() -> None:
                     help="also the outputs of the run, on the state of --state")
     ap.add_argument("--state", type=Path, default=None,
                     help="fields.npz of a run on the same mesh: its displacement")
-    ap.add_argument("--trace", action="store_true",
-                    help="also the live memory that tracemalloc sees (slower)")
-    args = ap.parse_args()
-    configure_runtime()
-    if args.trace:
-        tracemalloc.start()
-    peaks = PhasePeaks()
-    peaks.mark("imports")
+    args, peaks = PhasePeaks.start(ap, "imports")
 
     import brainbulge.geometry.brain.brain_mesh as brain_mesh
     import brainbulge.geometry.brain.template as template
