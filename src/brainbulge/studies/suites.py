@@ -119,7 +119,8 @@ def demo_plan(quick: bool) -> dict[str, Any]:
     return {
         "headline": {"alpha": 80.0, "beta": 60.0, "swelling": 1.2, "mesh_size": h},
         "sweep": {
-            # beta = 30 is left out: the small-opening cases stop early (docs/known-limits.md)
+            # beta = 30 is left out: the small openings take the most Newton iterations
+            # (docs/performance.md)
             "alphas": [40.0, 80.0] if quick else [20.0, 40.0, 60.0, 80.0],
             "betas": [60.0] if quick else [60.0, 120.0],
             "mesh_size": 0.1 if quick else 0.08,
