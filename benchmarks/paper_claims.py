@@ -48,7 +48,7 @@ from paper_claims_3d import (
     m_flaps,
     m_frontal_lower,
     m_frontal_smaller_displacement,
-    m_locations_shared,
+    m_locations_common,
     m_materials,
     m_mesh,
     m_midline,
@@ -119,7 +119,7 @@ MEASURES: dict[str, Callable[[Run], Row]] = {
     "5-swelling-volumes": m_swelling_volumes,
     "5-damage-thresholds": m_damage,
     "abstract-strain-30": m_strain_in_excess,
-    "abstract-locations-shared": m_locations_shared,
+    "abstract-locations-common": m_locations_common,
 }
 
 

@@ -335,9 +335,9 @@ ZONES = (("max_radial_stretch", lambda s: s["under_flap"] and s["rim_distance_mm
           "tangential maximum in a ring round the opening"))
 
 
-def m_locations_shared(run: Run) -> Row:
-    """The abstract's "locations of maximum stretch universally shared": in every scenario
-    each zone's 0.1 ml peak set lies where the paper puts it (:data:`ZONES`)."""
+def m_locations_common(run: Run) -> Row:
+    """The abstract's "locations of maximum stretch the same in all bulging brains": in
+    every scenario each zone's 0.1 ml peak set lies where the paper puts it (:data:`ZONES`)."""
     if not run.brain:
         return Row("no result", "not measured", "3D scenarios missing")
     parts, missing = [], []

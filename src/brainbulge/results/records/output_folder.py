@@ -21,10 +21,8 @@ A brainbulge command *claims* its ``--out`` folder before writing anything into 
   relative to the folder -> ``[size, mtime_ns]``, or null for logs) is made from it on every
   status change; releasing the folder writes it a last time and removes the journal and the
   lock. A file that appears in the folder by other means (a notebook saved there, another
-  run's results in a subfolder) is never listed.
-
-Files of a resumed run's manifest stay listed; the journal of a killed run counts as its
-manifest.
+  run's results in a subfolder) is never listed. A resumed run's manifest stays listed; a
+  killed run's journal counts as its manifest.
 """
 
 from __future__ import annotations
@@ -275,9 +273,10 @@ def _pid_alive(pid: int, since: float) -> bool:
         return True
 
 
-def _read_lock(lock: Path) -> dict[str, Any] | None:
+def _read_object(path: Path) -> dict[str, Any] | None:
+    """The JSON object in the regular file ``path``; None when unreadable or not an object."""
     try:
-        data = json.loads(read_regular(lock).decode("utf-8"))
+        data = json.loads(read_regular(path).decode("utf-8"))
     except (OSError, ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
@@ -311,7 +310,7 @@ def _in_use(path: Path, owner: dict[str, Any] | None) -> InputError:
 def _check_lock(path: Path) -> None:
     lock = path / LOCK_FILE
     if lock.exists() or lock.is_symlink():
-        owner = _read_lock(lock)
+        owner = _read_object(lock)
         if not _stale(lock, owner):
             raise _in_use(path, owner)
 
@@ -328,7 +327,7 @@ def _acquire_lock(path: Path) -> Path:
                 os.link(tmp, lock)
                 return lock
             except FileExistsError:
-                other = _read_lock(lock)
+                other = _read_object(lock)
                 if attempt or not _stale(lock, other):
                     raise _in_use(path, other) from None
                 log.warning("removing the stale lock of a run that is no longer running "
@@ -341,7 +340,7 @@ def _acquire_lock(path: Path) -> Path:
         ) from exc
     finally:
         tmp.unlink(missing_ok=True)
-    raise _in_use(path, _read_lock(lock))  # pragma: no cover - loop always returns/raises
+    raise _in_use(path, _read_object(lock))  # pragma: no cover - loop always returns/raises
 
 
 # --------------------------------------------------------------------------- the folder
@@ -376,9 +375,7 @@ class OutputFolder:
         from brainbulge.atomic import atomic_write_json
 
         run_json = self.path / "run.json"
-        try:
-            record = json.loads(read_regular(run_json).decode("utf-8"))
-        except (OSError, ValueError, RecursionError):
+        if (record := _read_object(run_json)) is None:
             return
         record[MANIFEST_KEY] = {f: None if sig is None else list(sig)
                                 for f, sig in sorted(self.manifest().items())}
