@@ -181,7 +181,7 @@ def run_2d_variant(alpha: float, beta: float, contact: str, variant: str,
     from brainbulge.solver.options import SolverOptions
     from brainbulge.solver.ramp import NewtonSolver
 
-    case = HemidiskCase(alpha=alpha, beta=beta, contact=contact)
+    case = HemidiskCase(alpha=alpha, beta=beta, contact=contact, full_domain=True)
     arc = case.skull_arc
     geo = (arc.R, arc.beta_deg, arc.center_deg)
     per_solve = variant != "released"

@@ -500,7 +500,8 @@ def small_strain_exponents(contact: str, corner: float) -> tuple[float, float]:
 
     case = HemidiskCase(contact=contact, mesh_size=SMALL_H, corner_mesh_size=corner,
                         swelling=SMALL_SWELLING, steps=1, edge_exclusion=0.0,
-                        skull_edge_radius=0.0, element="mini")  # the punch's sharp edge
+                        skull_edge_radius=0.0, element="mini",  # the punch's sharp edge
+                        full_domain=True)
     form = MixedForm(hemidisk_problem(case), element=case.element)
     sol = NewtonSolver(form, SolverOptions(steps=case.steps)).solve()
     if not sol.converged:

@@ -121,7 +121,8 @@ def test_offset_mesh_has_no_vertex_at_the_edge_and_the_edge_starts_outside_the_t
     from brainbulge.solver.mixed import MixedForm
     from edge_contact import SmoothEdgeContact
 
-    case = HemidiskCase(alpha=80.0, beta=60.0, contact="sliding", skull_edge_radius=0.0)
+    case = HemidiskCase(alpha=80.0, beta=60.0, contact="sliding", skull_edge_radius=0.0,
+                        full_domain=True)
     edges = edge_points(case.R, case.beta, case.opening_center)
 
     def nearest(mesh):

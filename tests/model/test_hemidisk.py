@@ -27,7 +27,7 @@ def _solve(**kw):
 
 @pytest.fixture(scope="module")
 def noslip():
-    return _solve(contact="noslip", mesh_size=0.1, skull_edge_radius=0.0)
+    return _solve(contact="noslip", mesh_size=0.1, skull_edge_radius=0.0, full_domain=True)
 
 
 @pytest.fixture(scope="module")

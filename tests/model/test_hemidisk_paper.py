@@ -15,7 +15,8 @@ from brainbulge.solver import MixedForm, NewtonSolver, SolverOptions
 
 
 def _solve(**kw):
-    case = HemidiskCase(skull_edge_radius=0.0, element="mini", **kw)  # the sharp edge
+    case = HemidiskCase(skull_edge_radius=0.0, element="mini",  # the sharp edge, both sides
+                        full_domain=True, **kw)
     problem = hemidisk_problem(case)
     form = MixedForm(problem, element=case.element)
     sol = NewtonSolver(form, SolverOptions(steps=case.steps)).solve()

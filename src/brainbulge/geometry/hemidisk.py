@@ -6,6 +6,10 @@ over the craniectomy, an arc of ``beta`` degrees centred at ``opening_center`` d
 Regions: ``swelling`` (a sector of ``alpha`` degrees centred on the symmetry axis, full radius,
 or a disk) and ``tissue``.
 
+With ``half`` the mesh covers only the half ``x >= 0`` of a case symmetric about the axis
+``x = 0`` (sector and opening centred on it): the axis is the boundary ``symmetry``, where
+the mirror image asks ``u_x = 0``.
+
 The domain is glued from pie slices between all break angles, so the mesh conforms to the
 sector edges and has vertices at the opening corners; the mesh size is ``h`` and ``h_corner``
 near the singular points (opening corners, sector edges on the boundary), set through netgen's
@@ -43,6 +47,7 @@ class Hemidisk:
     beta_deg: float = 60.0  # opening angle
     opening_center_deg: float = 90.0
     disk: tuple[float, float, float] | None = None  # (cx, cy, radius) of a swelling disk
+    half: bool = False  # mesh only x >= 0, the axis x = 0 a boundary named "symmetry"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.R) and self.R > 0):
@@ -62,6 +67,9 @@ class Hemidisk:
                 f"opening [{lo:g}, {hi:g}] deg leaves the curved boundary [0, 180] deg; "
                 "move --opening-center or reduce beta"
             )
+        if self.half and not self.symmetric:
+            raise InputError("only a case symmetric about the axis (a sector, the opening "
+                             "centred at 90 deg) can be meshed as a half domain")
         if self.disk is not None:
             cx, cy, rd = self.disk
             if not (rd > 0 and cy - rd > 0 and math.hypot(cx, cy) + rd < self.R):
@@ -69,6 +77,12 @@ class Hemidisk:
                     f"disk (centre ({cx}, {cy}), radius {rd}) must lie strictly inside the "
                     f"hemidisk of radius {self.R}"
                 )
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether the case is its own mirror image about the axis ``x = 0``: a sector
+        (always centred on the axis) under an opening centred at 90 deg, or no opening."""
+        return self.disk is None and (self.beta_deg == 0 or self.opening_center_deg == 90)
 
     @property
     def opening_angles_deg(self) -> tuple[float, float]:
@@ -91,17 +105,21 @@ class Hemidisk:
         if self.sector_angles_deg is not None and self.alpha_deg < 180:
             pts += [self._on_arc(a) for a in self.sector_angles_deg]
             pts.append((0.0, 0.0))
-        return pts
+        return [p for p in pts if not self.half or p[0] >= -1e-12 * self.R]
 
     def project(self, label: str, X: np.ndarray) -> np.ndarray:
         """Closest points (n, 2) of the curve named ``label`` to ``X`` (n, 2): the arc
-        (``skull``, ``opening``), the ``base``, the swelling disk's ``interface``, or for
+        (``skull``, ``opening``), the ``base``, the half domain's ``symmetry`` axis, the swelling
+        disk's ``interface``, or for
         other lines between regions (the sector edges) the nearest radial line."""
         X = np.array(X, dtype=float)
         if label in ("skull", "opening"):
             return self.R * X / np.linalg.norm(X, axis=1, keepdims=True)
         if label == "base":
             X[:, 1] = 0.0
+            return X
+        if label == "symmetry":
+            X[:, 0] = 0.0
             return X
         if label == "interface" and self.disk is not None:
             c = np.array(self.disk[:2])
@@ -125,6 +143,8 @@ class Hemidisk:
         circle = radius * np.stack([np.cos(t), np.sin(t)], axis=1)
         pts = (np.array(self.singular_points()).reshape(-1, 1, 2) + circle).reshape(-1, 2)
         inside = (pts[:, 1] >= 0) & (np.linalg.norm(pts, axis=1) <= self.R)
+        if self.half:
+            inside &= pts[:, 0] >= 0
         return pts[inside]
 
     def edge_band_points(self, spacing: float) -> np.ndarray:
@@ -140,7 +160,10 @@ class Hemidisk:
             for r in (self.R, self.R - 2 * spacing):
                 pts.append(r * np.stack([np.cos(t), np.sin(t)], axis=1))
         pts = np.concatenate(pts)
-        return pts[pts[:, 1] >= 0]
+        keep = pts[:, 1] >= 0
+        if self.half:
+            keep &= pts[:, 0] >= 0
+        return pts[keep]
 
     def _on_arc(self, deg: float) -> tuple[float, float]:
         t = math.radians(deg)
@@ -161,12 +184,13 @@ class Hemidisk:
         if not (h > 0 and math.isfinite(h)) or h > self.R:
             raise InputError(f"mesh size {h} must be positive and at most R = {self.R}")
         hc = h_corner if h_corner is not None else h / 5
-        breaks = {0.0, 180.0}
+        breaks = {0.0, 90.0, 180.0} if self.half else {0.0, 180.0}
         if self.beta_deg > 0:
             breaks |= set(self.opening_angles_deg)
         if self.sector_angles_deg is not None:
             breaks |= set(self.sector_angles_deg)
-        breaks_sorted = sorted(breaks)
+        top = 90.0 if self.half else 180.0  # the half domain ends at the axis
+        breaks_sorted = sorted(b for b in breaks if b <= top)
         o_lo, o_hi = self.opening_angles_deg
         s_lo, s_hi = self.sector_angles_deg or (math.nan, math.nan)
         slices = []
@@ -180,6 +204,8 @@ class Hemidisk:
             for e in face.edges:
                 if e is not arc and abs(_edge_mid(e)[1]) < 1e-9 * self.R:
                     e.name = "base"
+                elif self.half and e is not arc and abs(_edge_mid(e)[0]) < 1e-9 * self.R:
+                    e.name = "symmetry"
             face.faces.name = "swelling" if s_lo <= mid <= s_hi else "tissue"
             slices.append(face)
         shape = Glue(slices)

@@ -133,6 +133,10 @@ class HemidiskCase:
     edge_exclusion: float = option(
         0.05, "radius around the singular points left out of max_*/min_*", unit=" R",
         range=(0.0, 0.2), hint="beyond, max_*/min_* cover little")
+    full_domain: bool = option(
+        False, "solve a case symmetric about the axis (a sector under an opening centred at "
+        "90 deg) on the whole hemidisk instead of its half x >= 0 with u_x = 0 on the axis "
+        "(a check: the results are reported for the whole hemidisk either way)", solver=True)
     rezone: bool = option(True, "remesh through the deformation when the deformed mesh "
                           "degenerates or a load step fails (docs/design.md)", solver=True)
     name: str = option("hemidisk", "the run's name", internal=True)
@@ -146,6 +150,8 @@ class HemidiskCase:
         if self.skull == "rigid" and self.skull_edge_radius <= 0:
             raise InputError("the rigid skull needs a rounded cut edge: give "
                              "--skull-edge-radius > 0")
+        if not isinstance(self.full_domain, bool):
+            raise InputError(f"full_domain = {self.full_domain!r} must be true or false")
         if not isinstance(self.rezone, bool):
             raise InputError(f"rezone = {self.rezone!r} must be true or false")
         if self.disk is not None:
@@ -169,7 +175,15 @@ class HemidiskCase:
             beta_deg=self.beta,
             opening_center_deg=self.opening_center,
             disk=disk,  # type: ignore[arg-type]
+            half=self.half,
         )
+
+    @property
+    def half(self) -> bool:
+        """Whether the case is solved on the half hemidisk ``x >= 0``: when it is symmetric
+        about the axis (a sector, the opening centred at 90 deg) and not ``full_domain``."""
+        return (not self.full_domain and self.disk is None
+                and (self.beta == 0 or self.opening_center == 90))
 
     @property
     def corner_h(self) -> float:
@@ -278,21 +292,24 @@ def hemidisk_problem(case: HemidiskCase, mesh: ngs.Mesh | None = None) -> Proble
     m = case.tissue_material()
     materials = {r: m for r in set(mesh.GetMaterials())}
     swelling = {"swelling": case.swelling}
+    mirror = {0: "symmetry"} if case.half else {}  # u_x = 0 on the axis
     if case.rounded:  # one penalty contact on the whole arc against the rounded skull
         kappa = case.contact_stiffness()
         if case.contact == "noslip":
             opening = [Contact("opening", skull, kappa)] if case.beta > 0 else []
-            return Problem(mesh, materials, swelling, clamped="base|skull", contacts=opening)
-        return Problem(mesh, materials, swelling, clamped="base",
+            return Problem(mesh, materials, swelling, clamped="base|skull",
+                           clamped_components=mirror, contacts=opening)
+        return Problem(mesh, materials, swelling, clamped="base", clamped_components=mirror,
                        contacts=[Contact("skull|opening", skull, kappa)])
     if case.contact == "noslip":
         opening = []  # the paper's opening is traction-free and meets no obstacle
         if case.skull == "rigid" and case.beta > 0:
             opening = [Contact("opening", skull)]
-        return Problem(mesh, materials, swelling, clamped="base|skull", contacts=opening)
+        return Problem(mesh, materials, swelling, clamped="base|skull",
+                       clamped_components=mirror, contacts=opening)
     sliding = "skull" if case.skull == "paper" else "skull|opening"
     return Problem(
-        mesh, materials, swelling, clamped="base",
+        mesh, materials, swelling, clamped="base", clamped_components=mirror,
         contacts=[Contact(sliding, skull)],
     )
 

@@ -102,12 +102,14 @@ def run_hemidisk(
     form = sol.form
     centre = np.zeros(2)
     G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for both
+    points = point_fields(form, centre, gradient=G)
+    whole = dataclasses.replace(geo, half=False)  # the outputs are the whole hemidisk's
     summary: dict[str, Any] = {
         "case": case.name,
         "inputs": dataclasses.asdict(case),
         **solution_summary(
-            sol, centre, geo.singular_points(), case.edge_exclusion * case.R,
-            points=point_fields(form, centre, gradient=G),
+            sol, centre, whole.singular_points(), case.edge_exclusion * case.R,
+            points=points.mirrored() if case.half else points,
         ),
     }
     summary["rezones"] = sol.rezones
@@ -116,6 +118,8 @@ def run_hemidisk(
     x = vf.points[:, :2] + vf.point_data["u"][:, :2]  # deformed vertex positions
     summary["max_skull_crossing"] = skull_crossing(case, form, x)
     add_contact_fields(vf, form)
+    if case.half:
+        vf = vf.mirrored()
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
     js = sol.swelling_reached

@@ -42,6 +42,36 @@ class VertexFields:
     #: (those ``vertex_fields(corners=...)`` names: the NIfTI maps interpolate them)
     corner_data: dict[str, np.ndarray] = field(default_factory=dict)
 
+    def mirrored(self) -> VertexFields:
+        """The whole domain of a solution computed on its half ``x >= 0``: these vertices and
+        elements and their mirror images ``(-x, y, ...)`` about ``x = 0``, the vertices on
+        the plane shared. Vector fields (``u``) have their x component reversed; the scalar
+        fields are the reflection's own."""
+        n = len(self.points)
+        on_plane = np.abs(self.points[:, 0]) <= 1e-12 * np.abs(self.points).max()
+        image = np.where(on_plane, np.arange(n), n + np.cumsum(~on_plane) - 1)
+        points = np.concatenate([self.points, _reflect(self.points[~on_plane])])
+        cells = image[self.cells][:, ::-1]  # reversed: the images keep their orientation
+
+        def both(a: np.ndarray, keep: np.ndarray | slice = slice(None)) -> np.ndarray:
+            return np.concatenate([a, _reflect(a[keep]) if a.ndim == 2 else a[keep]])
+
+        return VertexFields(
+            points=points, cells=np.concatenate([self.cells, cells]),
+            regions=np.tile(self.regions, 2), region_names=self.region_names,
+            point_data={k: both(v, ~on_plane) for k, v in self.point_data.items()},
+            cell_data={k: both(v) for k, v in self.cell_data.items()},
+            corner_data={k: np.concatenate([v, _reflect(v)[:, ::-1] if v.ndim == 3
+                                            else v[:, ::-1]])
+                         for k, v in self.corner_data.items()})
+
+
+def _reflect(a: np.ndarray) -> np.ndarray:
+    """Vectors (the last axis) reflected about the plane ``x = 0``."""
+    out = np.array(a, copy=True)
+    out[..., 0] *= -1
+    return out
+
 
 def vertex_fields(
     form: MixedForm,

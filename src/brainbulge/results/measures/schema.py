@@ -135,7 +135,8 @@ KEYS: tuple[Key, ...] = (
        "solver time and its two main parts", labels=("wall time",)),
     _k("linear_iterations", "", "Krylov iterations over the whole run (0 with the direct "
        "solver)"),
-    _k(("elements", "dofs"), "", "mesh elements, unknowns"),
+    _k(("elements", "dofs"), "", "mesh elements, unknowns (of the mesh solved: the half "
+       "hemidisk for a symmetric case)"),
     _k("max_displacement", "length", "largest \\|u\\| over all points (no exclusion: the "
        "displacement is bounded everywhere)", labels=("max |u|",)),
     _k("argmax_displacement", "length", "reference position of `max_displacement`"),

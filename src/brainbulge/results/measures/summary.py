@@ -266,6 +266,21 @@ class PointFields:
         rx = re.compile(f"^(?:{pattern})$")
         return np.array([bool(rx.match(n)) for n in self.region_names])[self.region]
 
+    def mirrored(self) -> PointFields:
+        """These points and their mirror images ``(-x, y, ...)`` about the plane ``x = 0``:
+        the whole domain's points of a solution computed on its half ``x >= 0`` (the fields
+        are scalars that the reflection leaves as they are; the vertical displacement too)."""
+        X = self.q.X
+        q = dataclasses.replace(self.q, X=np.concatenate([X, X * _REFLECT[:X.shape[1]]]),
+                                weights=np.tile(self.q.weights, 2))
+        fields = {k: np.tile(v, 2) for k, v in self.fields.items()}
+        return PointFields(q=q, Js=fields["Js"], fields=fields,
+                           region=np.tile(self.region, 2), region_names=self.region_names)
+
+
+#: the reflection about the plane x = 0, per coordinate
+_REFLECT = np.array([-1.0, 1.0, 1.0])
+
 
 def point_fields(form, centre: np.ndarray,
                  fibres: Callable[[np.ndarray], np.ndarray] | None = None,
