@@ -103,3 +103,17 @@ def test_half_run_reports_the_whole_hemidisk(tmp_path) -> None:
     left = vtu.points[:, 0] < -0.5
     assert np.all(np.abs(u[left, 0]) <= np.abs(u[:, 0]).max())
     assert abs(u[:, 0].sum()) < 1e-9 * np.abs(u[:, 0]).sum()  # the mirror's u_x cancels
+    assert half["boundary_self_crossings"] == 0 == full["boundary_self_crossings"]
+
+
+def test_boundary_self_crossings_counts_a_fold() -> None:
+    """A square's boundary does not cross itself; moved into a bow tie, two of its sides
+    cross once; shared vertices do not count."""
+    from brainbulge.results.measures.folds import boundary_self_crossings, outer_edges
+
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    cells = np.array([[0, 1, 2], [0, 2, 3]])
+    assert sorted(map(tuple, outer_edges(cells))) == [(0, 1), (0, 3), (1, 2), (2, 3)]
+    assert boundary_self_crossings(pts, cells, np.zeros((4, 2))) == 0
+    bow_tie = np.array([[0.0, 0.0], [0.0, 0.0], [-1.0, 0.0], [1.0, 0.0]])
+    assert boundary_self_crossings(pts, cells, bow_tie) == 1

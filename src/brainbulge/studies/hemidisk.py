@@ -38,6 +38,7 @@ from brainbulge.results.export.writers import (
     vertex_fields,
     write_vtu,
 )
+from brainbulge.results.measures.folds import boundary_self_crossings
 from brainbulge.results.measures.recovery import recovered_gradient
 from brainbulge.results.measures.summary import point_fields, solution_summary
 from brainbulge.results.present.figures import (
@@ -120,6 +121,8 @@ def run_hemidisk(
     add_contact_fields(vf, form)
     if case.half:
         vf = vf.mirrored()
+    summary["boundary_self_crossings"] = boundary_self_crossings(vf.points, vf.cells,
+                                                                 vf.point_data["u"])
     write_vtu(out_dir / "fields.vtu", vf)
     save_vertex_fields(out_dir / "fields.npz", vf)
     js = sol.swelling_reached

@@ -215,6 +215,9 @@ KEYS: tuple[Key, ...] = (
        "back over the edge, or the opening's surface next to it crossing the arc, which "
        "`max_penetration` of the held arc does not see)", cases=_H,
        labels=("skull crossing",), fmt=".3g"),
+    _k("boundary_self_crossings", "-", "pairs of the deformed outer boundary's segments "
+       "(chords between vertices) that cross each other: 0 unless the surface folds onto "
+       "itself, which the model has no tissue self-contact to prevent", cases=_H),
     # --- the brain's
     _k("swelling_reached", "-", "the white-matter Js reached", cases=_B, labels=("Js",),
        fmt=".3f"),
