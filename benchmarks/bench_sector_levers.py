@@ -7,7 +7,12 @@ headline case) and each variant, one in-process run of the study's task:
 - ``no-rezoning``: ``rezone = false`` (the reference mesh to full load);
 - ``steps-8``: 8 initial load steps instead of 4;
 - ``no-relaxation``: without the residual-hotspot relaxation
-  (:class:`brainbulge.solver.fast.hotspot.HotspotRelaxation`).
+  (:class:`brainbulge.solver.fast.hotspot.HotspotRelaxation`);
+- ``step:CAP:SLIDE`` (e.g. ``step:0.3:2``): the rounded edge's step control with the Newton
+  update capped at ``CAP`` of a vertex's smallest edge and load steps sized to ``SLIDE``
+  element sizes (:data:`brainbulge.model.hemidisk.RESOLVED_EDGE_STEPS`);
+- ``edge-ratio:N``: the rounded edge's arc meshed at its radius over ``N``
+  (:data:`brainbulge.model.hemidisk.EDGE_MESH_RATIO`).
 
 Prints CPU seconds of the task, Newton iterations, rezonings, the load reached, and the
 largest relative difference of the summary's field numbers (extremes, percentiles,
@@ -17,7 +22,9 @@ path; a larger difference means the variant changed the discretisation (another 
 mesh, or none).
 
 Rerun with ``python benchmarks/bench_sector_levers.py`` (``--scenarios noslip_a80_b30``,
-``--variants default no-rezoning``); each run takes seconds to minutes.
+``--variants default no-rezoning``); each run takes seconds to minutes. The rounded edge's
+step control: ``--scenarios noslip_a80_b30 sliding_a80_b30 sliding_a60_b30 sliding_a80_b60
+--variants step:0.3:2 step:0.3:3 step:0.4:2 edge-ratio:2 step:0.4:3 step:0.4:4 step:0.5:3``.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import brainbulge.model.hemidisk as hemidisk
 from brainbulge.errors import ConvergenceError
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.studies.hemidisk import sector_scenarios, study_task
@@ -49,8 +57,15 @@ def run(scenario: dict, variant: str, out: Path) -> tuple[float, dict]:
     elif variant == "steps-8":
         sc["steps"] = 8
     applies = HotspotRelaxation.applies
+    steps, ratio = hemidisk.RESOLVED_EDGE_STEPS, hemidisk.EDGE_MESH_RATIO
     if variant == "no-relaxation":
         HotspotRelaxation.applies = staticmethod(lambda form: False)
+    elif variant.startswith("step:"):
+        cap, slide = (float(v) for v in variant.split(":")[1:])
+        hemidisk.RESOLVED_EDGE_STEPS = ({**steps[0], "slide": slide},
+                                        {**steps[1], "step_cap": cap})
+    elif variant.startswith("edge-ratio:"):
+        hemidisk.EDGE_MESH_RATIO = float(variant.split(":")[1])
     folder = out / f"{sc['name']}_{variant}"
     t0 = time.process_time()
     try:
@@ -59,6 +74,7 @@ def run(scenario: dict, variant: str, out: Path) -> tuple[float, dict]:
         summary = json.loads((folder / "summary.json").read_text())
     finally:
         HotspotRelaxation.applies = applies
+        hemidisk.RESOLVED_EDGE_STEPS, hemidisk.EDGE_MESH_RATIO = steps, ratio
     return time.process_time() - t0, summary
 
 
@@ -79,7 +95,8 @@ def largest_difference(a: dict, b: dict) -> tuple[float, str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS))
-    ap.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS),
+                    help=f"{', '.join(VARIANTS)}, step:CAP:SLIDE or edge-ratio:N")
     args = ap.parse_args()
     scenarios = {s["name"]: s for s in sector_scenarios(mesh_size=0.05, steps=4)}
     variants = ["default", *[v for v in args.variants if v != "default"]]
