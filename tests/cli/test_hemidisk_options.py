@@ -87,7 +87,7 @@ def test_the_run_file_tables_hold_the_case_fields() -> None:
 
     tables = case_tables(HemidiskCase(corner_mesh_size=0.01, rim_mesh_size=0.005), SOLVER_FIELDS)
     assert set(tables["solver"]) == {"mesh_size", "corner_mesh_size", "rim_mesh_size", "steps",
-                                     "element", "rezone"}
+                                     "element", "full_domain", "rezone"}
     assert set(tables["case"]) == {f.name for f in dataclasses.fields(HemidiskCase)} - set(
         tables["solver"]) - {"disk"}  # None: left out
     assert tables["case"]["swelling"] == SECTOR_SWELLING  # the resolved default is recorded
