@@ -1,31 +1,27 @@
-"""The hemidisk cases of docs/model.md sections 4-5 as :class:`Problem` s.
+"""The hemidisk cases of docs/model.md sections 4-5 and 10 as :class:`Problem` s.
 
-The base is clamped. The skull is ``paper`` (the default) or ``rigid`` (an extension).
+The base is clamped. A case symmetric about the axis (a sector under an opening centred at
+90 deg) is solved on its half ``x >= 0`` with ``u_x = 0`` on the axis (boundary
+``symmetry``) unless ``full_domain``. The skull is ``paper`` (the default) or ``rigid`` (an
+extension).
 
-``skull = "paper"``, the paper's model (its section 3): the skull is the arc ``r = R`` outside
-the opening, of zero thickness with a sharp edge (:class:`SkullArc2D`); the opening arc is
-traction-free and meets no obstacle.
+``skull = "paper"``, the paper's model (its section 3), with the edge at the opening rounded
+by ``skull_edge_radius`` (:class:`RigidSkull2D` given :data:`PAPER_SKULL_THICKNESS`):
 
-- ``noslip``: ``u = 0`` on the skull arc ("the boundary nodes are fixed");
-- ``sliding``: the skull arc's boundary slides without friction on the circle ``r = R`` and
-  may separate inward (unilateral contact with :class:`SkullArc2D`). The material arc stays
-  on the circle's side also where it slides past the edge's angle (it is not released there),
-  so the skull's sharp edge can end up inside the tissue: ``max_skull_crossing`` reports by
-  how much (docs/design.md, "2D sliding at the paper's sharp edge").
+- ``sliding``: the whole material arc, skull part and opening, in frictionless contact with
+  the rounded skull by a penalty at its Gauss points (``Contact(..., penalty=kappa)``): the
+  tissue slides along the skull, is released past the edge and turns outward round it;
+- ``noslip``: ``u = 0`` on the skull arc ("the boundary nodes are fixed"); the opening in
+  contact with the rounded skull.
 
-``skull = "rigid"``, an extension: a rigid shell of thickness ``skull_thickness`` with cut
-edges rounded by ``skull_edge_radius`` (:class:`RigidSkull2D`), the rounding in the bone.
+With ``skull_edge_radius = 0`` the skull is the paper's sharp-edged arc (:class:`SkullArc2D`,
+kept for comparison): no-slip leaves the opening traction-free; sliding holds the material
+arc to ``r <= R`` on the whole circle by exact multipliers at its vertices (primal-dual
+active set), also past the edge's angle (docs/design.md, "2D sliding at the paper's sharp
+edge").
 
-- ``noslip``: ``u = 0`` on the skull part of the arc; the opening part is free but cannot
-  enter the shell's cut faces (frictionless unilateral contact);
-- ``sliding``: frictionless unilateral contact of the whole arc (skull part and opening) with
-  the shell, so tissue slides along it and bulges around the rounded cut edges. Known limit:
-  with small openings and large swelling regions (alpha 60-80, beta 30) the tissue pressed
-  around the rounding is squeezed in a layer one element thick and the ramp stops
-  (docs/known-limits.md).
-
-Contact is frictionless, with exact contact pressures at the boundary nodes by a primal-dual
-active set.
+``skull = "rigid"``: a rigid shell of thickness ``skull_thickness`` with the same rounding
+and the same contact as the rounded paper skull.
 """
 
 from __future__ import annotations
@@ -101,9 +97,10 @@ class HemidiskCase:
     contact: str = option("sliding", "contact of the tissue with the skull: frictionless "
                           "sliding or no-slip", choices=CONTACTS)
     skull: str = option(
-        "paper", "paper: the paper's zero-thickness skull arc with a sharp edge, the opening "
-        "traction-free; rigid: a rigid shell of finite thickness with rounded cut edges, also "
-        "in contact with the opening (an extension, docs/model.md)", choices=SKULLS)
+        "paper", "paper: the paper's skull arc, its edge at the opening rounded by "
+        "--skull-edge-radius (0: the paper's sharp edge, the opening traction-free); rigid: "
+        "a rigid shell of finite thickness with rounded cut edges (an extension, "
+        "docs/model.md)", choices=SKULLS)
     R: float = option(1.0, "hemidisk radius [length]", range=(1e-3, 1e4), label="radius R",
                       flag="--radius", hint="lengths scale with R: R = 1 is usual")
     mesh_size: float = option(0.05, "element size", unit=" R", range=MESH_SIZE_RANGE,
