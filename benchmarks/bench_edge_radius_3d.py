@@ -26,7 +26,8 @@ alone (the summaries leave the band out) gets the percentile and the peak too.
 Rerun: ``python benchmarks/bench_edge_radius_3d.py --cache CACHE --out OUT [--tets 100000]
 [--radii 8 4 2 1] [--scenarios left-both ...] [--capped]`` (about 7 min per run at 111k tets,
 10-30 min at 428k, on one core); a run whose ``summary.json`` is in ``OUT`` is read, not
-rerun; ``--table`` only reads every run in ``OUT``.
+rerun, one stopped mid-way (its ``restart.npz`` there) resumed; ``--table`` only reads every
+run in ``OUT``.
 """
 
 from __future__ import annotations
@@ -83,10 +84,12 @@ class EdgeRun:
                    bool(m["capped"]))
 
     def argv(self, mesh: Path, out: Path) -> list[str]:
-        """The arguments of ``brainbulge``."""
+        """The arguments of ``brainbulge``: a folder with a restart file (a run stopped
+        mid-way) is resumed, any other replaced."""
+        resume = (out / "restart.npz").is_file()
         return ["brain", "--mesh", str(mesh), "--linear-solver", "krylov", "--flap", self.flap,
                 "--swell", self.swell, "--skull-edge-radius", f"{self.radius:g}",
-                "--out", str(out), "--overwrite"]
+                "--out", str(out), *([] if resume else ["--overwrite"])]
 
 
 def run(r: EdgeRun, out: Path, cache: Path) -> float:
