@@ -10,8 +10,9 @@ once into ``--cache`` by ``brainbulge mesh``), for each scenario of the paper's 
 a vertex's smallest edge and taken without line search, load steps sized by how far the
 vertices slid, no predictor), set in the run's process (:func:`capped_main`).
 
-Per run the table gives whether the load ramp reached full load (else the load reached),
-Newton iterations (accepted load steps; rejected steps in brackets), the process's wall time
+Per run the table gives whether the load ramp reached full load (else the load reached; a
+run stopped before its summary: the last load accepted in its log), Newton iterations
+(accepted load steps; rejected steps in brackets), the process's wall time
 and, from its vertex fields, the rim's measures over the parenchyma within
 :data:`RING_MM` of the flap's rim (the curve where the cutting cylinder meets the skull's
 inner surface), where the paper puts its compression (radial stretch down to 0.7) and its
@@ -171,8 +172,10 @@ def row(r: EdgeRun, out: Path, cache: Path) -> str:
     if not summary.is_file():
         log = folder / "brainbulge.log"
         got = h3.row_from_log(log.read_text(), r.name, "") if log.is_file() else None
-        state = f"no: load {got['load']:.3f}, {got['newton']} Newton" if got else "no log"
-        return head + f" {MESH_LABELS.get(r.tets, r.tets)} | {state} |" + " |" * 10
+        cells = ([f"stopped at load {got['load']:.3f}", str(got["newton"])] if got
+                 else ["no log", "-"])
+        return (head + f" {MESH_LABELS.get(r.tets, r.tets)} | " + " | ".join(cells)
+                + f" | {wall:.0f} |" + " - |" * 8)
     s = json.loads(summary.read_text())
     done = s.get("converged", True) and s.get("load_reached", 1.0) >= 1.0
     conv = "yes" if done else f"no: load {s.get('load_reached', 0.0):.3f}"
