@@ -121,15 +121,28 @@ def run_variant(v: Variant, out: Path, cache: Path) -> float:
     return time.perf_counter() - t0
 
 
-def zone_measures(run: Path, mesh: Path, flap: str = "left") -> dict[str, float]:
-    """The three zones' measures of a run's vertex fields (``fields.npz``): ``<zone>_<measure>``
-    for the parenchyma's zones ``band`` (within :data:`BAND_MM` of the flap's rim, where the
-    edge is singular), ``ring`` (from there to :data:`RING_MM`) and ``deep`` (under the flap,
-    farther than :data:`RING_MM` from the rim), the
-    measures ``radial_p01`` (the radial stretch exceeded by all but 1 % of the zone's volume),
-    ``radial_peak`` and ``tangential_peak`` (exceeded in :data:`PEAK_ML`). Each vertex weighs
-    a quarter of its tets' volumes (vertices are per region, so the weights sum to the
-    zone's volume)."""
+@dataclasses.dataclass
+class RimGeometry:
+    """A run's vertex fields (``vf``, :func:`~brainbulge.results.export.writers.
+    load_vertex_fields`) placed against its flap: ``weights`` a quarter of each vertex's tets'
+    volumes [mm^3] (vertices are per region, so they sum to a region's volume), ``parenchyma``
+    the vertices and ``tissue_tets`` the tets of the parenchyma, ``rim`` and ``under`` each
+    vertex's distance to the flap's rim [mm] and whether it lies inside the cutter, ``rim_of``
+    the rim distance of any points [mm]."""
+
+    vf: object
+    weights: np.ndarray
+    parenchyma: np.ndarray
+    tissue_tets: np.ndarray
+    rim: np.ndarray
+    under: np.ndarray
+    rim_of: object
+    centre: np.ndarray
+
+
+def rim_geometry(run: Path, mesh: Path, flap: str = "left") -> RimGeometry:
+    """The :class:`RimGeometry` of a run's ``fields.npz`` on its mesh ``mesh`` (``brain.npz``)
+    and flap ``flap``; the rim is where the cutting cylinder meets the skull's inner surface."""
     from brainbulge.geometry.brain import load_brain_mesh
     from brainbulge.geometry.brain.skull import RigidSkull
     from brainbulge.results.export.writers import load_vertex_fields
@@ -144,19 +157,43 @@ def zone_measures(run: Path, mesh: Path, flap: str = "left") -> dict[str, float]
     w = np.bincount(cells.ravel(), np.repeat(vol / 4.0, 4), minlength=len(X))
     names = np.asarray(vf.region_names).astype(str)
     tissue = np.array([bool(re.fullmatch(PARENCHYMA, n)) for n in names])
+    tissue_tets = tissue[np.asarray(vf.regions)]
     par = np.zeros(len(X), bool)
-    par[cells[tissue[np.asarray(vf.regions)]].ravel()] = True
-    rim = np.hypot(cut.cutter_distance(X)[0], skull.envelope_distance(X, gradient=False)[0])
-    under = cut.cutter_distance(X)[0] < 0
+    par[cells[tissue_tets].ravel()] = True
+
+    def rim_of(points: np.ndarray) -> np.ndarray:
+        return np.hypot(cut.cutter_distance(points)[0],
+                        skull.envelope_distance(points, gradient=False)[0])
+
+    return RimGeometry(vf, w, par, tissue_tets, rim_of(X), cut.cutter_distance(X)[0] < 0,
+                       rim_of, bm.envelope.centre_mm())
+
+
+def volume_peaks(g: RimGeometry, mask: np.ndarray, prefix: str) -> dict[str, float]:
+    """``<prefix>_radial_p01`` (the radial stretch exceeded by all but 1 % of the vertices'
+    volume in ``mask``), ``<prefix>_radial_peak`` and ``<prefix>_tangential_peak`` (exceeded
+    in :data:`PEAK_ML`)."""
+    w = g.weights[mask]
+    lam_n, lam_t = g.vf.point_data["lambda_n"][mask], g.vf.point_data["lambda_t"][mask]
+    return {f"{prefix}_radial_p01": _volume_quantile(lam_n, w, 0.01 * w.sum()),
+            f"{prefix}_radial_peak": -_volume_quantile(-lam_n, w, 1000 * PEAK_ML),
+            f"{prefix}_tangential_peak": -_volume_quantile(-lam_t, w, 1000 * PEAK_ML)}
+
+
+def zone_measures(run: Path, mesh: Path, flap: str = "left") -> dict[str, float]:
+    """The three zones' measures of a run's vertex fields (``fields.npz``): ``<zone>_<measure>``
+    for the parenchyma's zones ``band`` (within :data:`BAND_MM` of the flap's rim, where the
+    edge is singular), ``ring`` (from there to :data:`RING_MM`) and ``deep`` (under the flap,
+    farther than :data:`RING_MM` from the rim), the measures of :func:`volume_peaks`. Each
+    vertex weighs a quarter of its tets' volumes (vertices are per region, so the weights sum
+    to the zone's volume)."""
+    g = rim_geometry(run, mesh, flap)
+    par, rim = g.parenchyma, g.rim
     zones = {"band": par & (rim < BAND_MM), "ring": par & (rim >= BAND_MM) & (rim < RING_MM),
-             "deep": par & under & (rim >= RING_MM)}
-    lam_n, lam_t = vf.point_data["lambda_n"], vf.point_data["lambda_t"]
+             "deep": par & g.under & (rim >= RING_MM)}
     out = {}
     for zone, mask in zones.items():
-        out[f"{zone}_radial_p01"] = _volume_quantile(lam_n[mask], w[mask], 0.01 * w[mask].sum())
-        out[f"{zone}_radial_peak"] = -_volume_quantile(-lam_n[mask], w[mask], 1000 * PEAK_ML)
-        out[f"{zone}_tangential_peak"] = -_volume_quantile(-lam_t[mask], w[mask],
-                                                           1000 * PEAK_ML)
+        out.update(volume_peaks(g, mask, zone))
     return out
 
 

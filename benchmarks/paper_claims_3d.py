@@ -216,15 +216,18 @@ def _brain_extreme(run: Run, key: str, paper: float, stretch: bool,
     return Row("; ".join(ours), "differs" if reasons else "holds", "; ".join(reasons))
 
 
-#: what the 3D sensitivity study (benchmarks/bench_sensitivity_3d.py) found for the
+#: what the 3D sensitivity and edge-radius studies (benchmarks/bench_sensitivity_3d.py,
+#: bench_edge_radius_3d.py) found for the
 #: magnitudes, quoted in every 3D magnitude row that differs
 SENSITIVITY = ("cause not found: on the 111k template one change at a time (edge radius "
                "8 / 4 / 2 mm, superior band 0 / 1 / 2 cm, base 10 mm lower / higher, CSF x10; "
                "x0.1 did not converge; the mesh 111k -> 428k tets, 0.004 at most) "
                "moves these 0.1 ml peaks by 0.024 at most, the sharper edge away "
-               "from the paper; sampling the vertices instead (nodal values, as a contour plot "
-               "shows) lifts the tangential peak 5-25 mm from the rim to 1.23-1.29, not the "
-               "radial ones (docs/performance.md, bench_sensitivity_3d.py)")
+               "from the paper (the edge radius 8 / 4 / 2 / 1 mm in all six scenarios: "
+               "0.024 at most, a smaller radius away from the paper or level within 0.002; "
+               "bench_edge_radius_3d.py); sampling the vertices instead (nodal values, as a "
+               "contour plot shows) lifts the tangential peak 5-25 mm from the rim to "
+               "1.23-1.29, not the radial ones (docs/performance.md, bench_sensitivity_3d.py)")
 
 
 def _swelling_text(run: Run) -> str:

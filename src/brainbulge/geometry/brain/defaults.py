@@ -7,7 +7,10 @@ importing the meshing stack."""
 #: stiffness, creeps around it and stalls Newton: on the 21k-tet template brain 8 mm completes
 #: the six scenarios and 4 mm stalls in one (frontal flap, right swelling, Js 1.096; docs/
 #: model.md). With the rounding made by eroding the cutter instead, 3 mm stalled at >= 400k
-#: tets and 6 mm at 1.54M, 8 mm converged there; not yet measured at that size in the bone.
+#: tets and 6 mm at 1.54M, 8 mm converged there. In the bone (docs/design.md): on the 111k-tet
+#: template 2 mm completes the six scenarios (8-13 Newton iterations) and 1 mm five of six; at
+#: 428k tets 2 mm stalls at full load (left flap, both sides), also with the 2D resolved edge's
+#: capped Newton updates, and so does 4 mm.
 EDGE_RADIUS_MM = 8.0
 #: the cut edge's rounding radii a case may ask for [mm]: below 0.1 mm the edge is sharp for
 #: any mesh, beyond 10 mm the rounding eats into small flaps
