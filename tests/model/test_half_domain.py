@@ -106,10 +106,15 @@ def test_half_run_reports_the_whole_hemidisk(tmp_path) -> None:
     assert half["boundary_self_crossings"] == 0 == full["boundary_self_crossings"]
 
 
-def test_boundary_self_crossings_counts_a_fold() -> None:
+@pytest.mark.parametrize("block", [256, 1])
+def test_boundary_self_crossings_counts_a_fold(block, monkeypatch) -> None:
     """A square's boundary does not cross itself; moved into a bow tie, two of its sides
-    cross once; shared vertices do not count."""
+    cross once; chords with a common vertex do not count; the count does not depend on
+    how many chords are tested at a time."""
+    from brainbulge.results.measures import folds
     from brainbulge.results.measures.folds import boundary_self_crossings, outer_edges
+
+    monkeypatch.setattr(folds, "BLOCK", block)
 
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
     cells = np.array([[0, 1, 2], [0, 2, 3]])

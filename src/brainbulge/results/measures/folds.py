@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: boundary chords tested against all others at a time (bounds the pair arrays' memory)
+BLOCK = 256
+
 
 def outer_edges(cells: np.ndarray) -> np.ndarray:
     """The edges ``(n, 2)`` (vertex numbers) that belong to exactly one of the triangles
@@ -37,10 +40,16 @@ def boundary_self_crossings(points: np.ndarray, cells: np.ndarray, u: np.ndarray
         d, f = b - a, c[None, :, :] - a[:, None, :]
         return d[:, None, 0] * f[..., 1] - d[:, None, 1] * f[..., 0]
 
-    sides_p = np.sign(orient(p, q, p)) * np.sign(orient(p, q, q))  # [i, j]: j's ends about i
-    crosses = (sides_p < 0) & (sides_p.T < 0)
-    shared = np.zeros(crosses.shape, dtype=bool)  # [i, j]: the chords share a vertex
-    for a in range(2):
-        for b in range(2):
-            shared |= e[:, a, None] == e[None, :, b]
-    return int(np.count_nonzero(np.triu(crosses & ~shared, k=1)))
+    count = 0
+    for i0 in range(0, len(e), BLOCK):  # rows in blocks: (BLOCK, n) arrays on fine meshes
+        rows = slice(i0, i0 + BLOCK)
+        # [i, j]: j's ends on opposite sides of i, and i's ends on opposite sides of j
+        apart = np.sign(orient(p[rows], q[rows], p)) * np.sign(orient(p[rows], q[rows], q))
+        across = np.sign(orient(p, q, p[rows])) * np.sign(orient(p, q, q[rows]))
+        crosses = (apart < 0) & (across.T < 0)
+        for a in range(2):  # chords with a common vertex do not count
+            for b in range(2):
+                crosses &= e[rows, a, None] != e[None, :, b]
+        later = np.arange(len(e))[None, :] > np.arange(i0, i0 + crosses.shape[0])[:, None]
+        count += int(np.count_nonzero(crosses & later))
+    return count
