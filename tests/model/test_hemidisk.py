@@ -180,8 +180,8 @@ def test_noslip_boundary_does_not_move(noslip) -> None:
 
 
 def test_noslip_opening_stays_out_of_the_skull(noslip_rigid) -> None:
-    """With the rigid skull, the free opening boundary turns around the opening corners but
-    cannot enter the skull's cut face (without the obstacle it went 0.033 R into it here,
+    """With the rigid skull, the free opening boundary bulges past the rounded cut edges but
+    cannot enter the skull (without the obstacle it went 0.033 R into the cut face here,
     0.027 R at h = 0.05)."""
     case, problem, form, solver, sol = noslip_rigid
     mesh = problem.mesh
@@ -191,7 +191,7 @@ def test_noslip_opening_stays_out_of_the_skull(noslip_rigid) -> None:
     gap, _ = case.obstacle.gap_and_normal(x)
     assert gap.min() > -1e-3 * case.R  # the penalty's: pressure / kappa
     assert solver.equations.max_penetration() < 1e-3 * case.R  # at its Gauss points
-    assert np.any(gap < 1e-6 * case.R)  # and it does touch the cut edge
+    assert gap.min() < 1e-2 * case.R  # and it comes close to the rounding (0.002 R)
 
 
 def test_mirror_symmetry(noslip) -> None:

@@ -8,6 +8,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from brainbulge.results.export.writers import VertexFields
 from brainbulge.studies import hemidisk as hd
@@ -101,7 +102,8 @@ def test_a_stop_on_the_rounded_cut_edge_gets_its_own_advice() -> None:
                         skull_edge_radius=0.05)
     skull = case.obstacle
     centres = skull.edge_centres()
-    half = np.radians(15.0)
+    half = np.radians(15.0 + skull.rounding_deg)  # the corners, rho behind the end faces
+    assert skull.rounding_deg == pytest.approx(np.degrees(np.arcsin(0.05 / 1.05)))
     np.testing.assert_allclose(centres, 1.05 * np.array(
         [[np.cos(np.pi / 2 - half), np.sin(np.pi / 2 - half)],
          [np.cos(np.pi / 2 + half), np.sin(np.pi / 2 + half)]]))

@@ -5,15 +5,20 @@
 
 :class:`RigidSkull2D` is an extension, a rigid body of finite thickness. The skull is a
 circular shell of inner radius ``R`` and thickness ``T`` with an opening of
-angle ``beta`` centred at angle ``theta_o``. Its cut faces have rounded edges of radius ``rho``:
-the body is the set of points within ``rho`` of a *core*, the annular sector
-``R + rho <= r <= R + T - rho`` outside the opening, so that its inner surface is exactly the
-circle ``r = R`` up to the opening angles and then turns outward on a circle of radius ``rho``.
+angle ``beta`` centred at angle ``theta_o``. Its cut edges are rounded with radius ``rho``
+inside the bone (the sharp shell opened by a disk of radius ``rho``): the body is the set of
+points within ``rho`` of a *core*, the part of the annulus ``R + rho <= r <= R + T - rho``
+that lies ``rho`` or more behind the end faces. Its inner surface is the circle ``r = R``,
+the end faces are the rays at ``theta_o -+ beta/2`` as in the sharp shell, and between them a
+circle of radius ``rho`` cuts off each corner: the rounding removes bone (an area
+``(1 - pi/4) rho^2`` per edge) and adds none, so no bone reaches into the opening.
 
-The gap ``g(x) = dist(x, core) - rho`` is positive outside the skull, negative inside it:
+The gap ``g(x) = dist(x, core) - rho`` is positive outside the skull, negative inside it. In
+coordinates about the nearer end face (``t`` along it, ``s`` into the bone):
 
-- at angles covered by the skull, ``dist = max(R + rho - r, r - (R + T - rho), 0)``;
-- in the opening, ``dist`` is the distance to the nearer end segment of the core.
+- where the radial projection of ``x`` onto the core's radii lies in the core,
+  ``dist = max(R + rho - r, r - (R + T - rho), 0)``;
+- otherwise ``dist`` is the distance to the core's end segment ``s = rho``.
 
 It is written with NGSolve coefficient functions of the deformed position ``x = X + u`` so that
 the contact residual and tangent come from symbolic differentiation; :meth:`gap_numpy` is the
@@ -107,36 +112,64 @@ class RigidSkull2D:
                 f"skull edge radius {self.edge_radius} must be positive and below half the "
                 f"thickness {self.thickness}"
             )
+        if 0 < self.beta_deg and not self.edge_radius < (self.R + self.edge_radius) * (
+                math.sin(math.radians(self.beta_deg / 2))):
+            raise InputError(f"skull edge radius {self.edge_radius} is too large for an "
+                             f"opening of {self.beta_deg} deg; give a smaller radius")
 
     @property
     def _core(self) -> tuple[float, float, float, float]:
+        """``R1 = R + rho``, ``R2 = R + T - rho``, half the opening ``beta/2`` [rad] and
+        ``rho``: the core is ``R1 <= r <= R2`` with ``s >= rho``."""
         rho = self.edge_radius
         return self.R + rho, self.R + self.thickness - rho, math.radians(self.beta_deg) / 2, rho
+
+    @property
+    def _segment(self) -> tuple[float, float]:
+        """The core's end segment ``s = rho`` runs over ``t0 <= t <= t1`` [length]."""
+        R1, R2, _, rho = self._core
+        return math.sqrt(R1 * R1 - rho * rho), math.sqrt(R2 * R2 - rho * rho)
+
+    @property
+    def rounding_deg(self) -> float:
+        """How far the rounding reaches along the arc behind each end face [deg]: the
+        circle ``r = R`` is the skull's surface from ``beta/2`` plus this on."""
+        t0, _ = self._segment
+        return math.degrees(math.atan2(self.edge_radius, t0))
 
     def gap(self, x: ngs.CoefficientFunction) -> ngs.CoefficientFunction:
         """``g(x)`` for a 2-vector CF ``x`` [length]."""
         R1, R2, half, rho = self._core
+        if half == 0:  # no opening: the core is the whole annulus
+            r = ngs.sqrt(x[0] * x[0] + x[1] * x[1] + 1e-30)
+            return ngs.IfPos(R1 - r, R1 - r, ngs.IfPos(r - R2, r - R2, 0)) - rho
+        t0, t1 = self._segment
         c, s = math.cos(math.radians(self.center_deg)), math.sin(math.radians(self.center_deg))
         xr = x[0] * c + x[1] * s  # coordinates rotated so the opening centre is at angle 0
-        yr = -x[0] * s + x[1] * c
-        r = ngs.sqrt(xr * xr + yr * yr + 1e-30)
-        delta = ngs.atan2(yr, xr)
+        ay = ngs.IfPos(-x[0] * s + x[1] * c, -x[0] * s + x[1] * c, x[0] * s - x[1] * c)
+        r = ngs.sqrt(xr * xr + ay * ay + 1e-30)
+        t = xr * math.cos(half) + ay * math.sin(half)  # along the nearer end face
+        depth = -xr * math.sin(half) + ay * math.cos(half)  # into the bone from that face
+        tc = ngs.IfPos(t0 - t, t0, ngs.IfPos(t - t1, t1, t))
+        d_seg = ngs.sqrt((t - tc) ** 2 + (depth - rho) ** 2 + 1e-30)
         band = ngs.IfPos(R1 - r, R1 - r, ngs.IfPos(r - R2, r - R2, 0))
-        # end segment on the side of the point: direction e = (cos, +-sin) of `half`
-        ey = ngs.IfPos(delta, math.sin(half), -math.sin(half))
-        ex = math.cos(half)
-        t = xr * ex + yr * ey
-        t = ngs.IfPos(R1 - t, R1, ngs.IfPos(t - R2, R2, t))
-        d_end = ngs.sqrt((xr - t * ex) ** 2 + (yr - t * ey) ** 2 + 1e-30)
-        in_opening = half - ngs.IfPos(delta, delta, -delta)  # > 0 inside the opening
-        return ngs.IfPos(in_opening, d_end, band) - rho
+        r_core = ngs.IfPos(R1 - r, R1, ngs.IfPos(r - R2, R2, r))
+        radial = depth * r_core - rho * r  # > 0: the radial projection lies in the core
+        return ngs.IfPos(radial, ngs.IfPos(d_seg - band, band, d_seg), d_seg) - rho
 
     def edge_centres(self) -> np.ndarray:
-        """Centres ``(R + rho) (cos, sin)(theta_o -+ beta/2)`` of the two rounded cut edges,
-        shape (2, 2) [length]."""
-        R1, _, half, _ = self._core
-        th = math.radians(self.center_deg) + np.array([-half, half])
-        return R1 * np.column_stack([np.cos(th), np.sin(th)])
+        """Centres of the two rounded cut edges (the core's corners, ``rho`` from the arc
+        and from the end face), shape (2, 2) [length]."""
+        _, _, half, rho = self._core
+        t0, _ = self._segment
+        th = math.radians(self.center_deg)
+        centres = []
+        for side in (-1.0, 1.0):
+            xr = t0 * math.cos(half) - rho * math.sin(half)
+            yr = side * (t0 * math.sin(half) + rho * math.cos(half))
+            centres.append((xr * math.cos(th) - yr * math.sin(th),
+                            xr * math.sin(th) + yr * math.cos(th)))
+        return np.array(centres)
 
     def near_cut_edge(self, x: np.ndarray, within: float = 2.0) -> bool:
         """Whether the point ``x`` (2,) [length] lies within ``within`` edge radii of a
@@ -156,23 +189,24 @@ class RigidSkull2D:
         active-set contact (:mod:`brainbulge.solver.contact.points`).
         """
         R1, R2, half, rho = self._core
+        t0, t1 = self._segment
         th = math.radians(self.center_deg)
         xr = x[:, 0] * math.cos(th) + x[:, 1] * math.sin(th)
         yr = -x[:, 0] * math.sin(th) + x[:, 1] * math.cos(th)
-        r = np.hypot(xr, yr)
-        delta = np.arctan2(yr, xr)
+        side = np.where(yr < 0, -1.0, 1.0)
+        ay = np.abs(yr)
+        r = np.hypot(xr, ay)
+        ch, sh = math.cos(half), math.sin(half)
+        t, depth = xr * ch + ay * sh, -xr * sh + ay * ch
+        dt, dn = t - np.clip(t, t0, t1), depth - rho  # from the segment's nearest point
+        d_seg = np.hypot(dt, dn)
         band = np.maximum.reduce([R1 - r, r - R2, np.zeros_like(r)])
-        ey = np.where(delta > 0, math.sin(half), -math.sin(half))
-        ex = math.cos(half)
-        t = np.clip(xr * ex + yr * ey, R1, R2)
-        dx, dy = xr - t * ex, yr - t * ey
-        d_end = np.hypot(dx, dy)
-        opening = np.abs(delta) < half
-        g = np.where(opening, d_end, band) - rho
+        use_band = (half == 0) | (depth * np.clip(r, R1, R2) >= rho * r) & (band <= d_seg)
+        g = np.where(use_band, band, d_seg) - rho
         sign = np.where(R1 - r > 0, -1.0, np.where(r - R2 > 0, 1.0, 0.0))
         safe_r = np.maximum(r, 1e-300)
-        safe_d = np.maximum(d_end, 1e-300)
-        gxr = np.where(opening, dx / safe_d, sign * xr / safe_r)
-        gyr = np.where(opening, dy / safe_d, sign * yr / safe_r)
+        safe_d = np.maximum(d_seg, 1e-300)
+        gx = np.where(use_band, sign * xr / safe_r, (dt * ch - dn * sh) / safe_d)
+        gy = side * np.where(use_band, sign * ay / safe_r, (dt * sh + dn * ch) / safe_d)
         c, s = math.cos(th), math.sin(th)
-        return g, np.column_stack([gxr * c - gyr * s, gxr * s + gyr * c])
+        return g, np.column_stack([gx * c - gy * s, gx * s + gy * c])
