@@ -347,3 +347,20 @@ def test_max_shear_stress_of_simple_shear_is_the_closed_form() -> None:
     # a dilatation (the swelling's Js) adds no shear
     assert max_shear_stress(1.1 ** (1 / 3) * F[:1], MooneyRivlin(c1, c2))[0] == pytest.approx(
         0.0, abs=1e-9)
+
+
+def test_max_shear_stress_of_an_inverted_gradient_is_nan_without_a_warning() -> None:
+    """``det F <= 0`` has no stress: NaN there (the summary leaves it out and says so), no
+    numpy warning on the user's screen, and the other points are unaffected."""
+    import warnings
+
+    from brainbulge.materials.mooney_rivlin import MooneyRivlin
+    from brainbulge.results.measures.fields import max_shear_stress
+
+    F = np.tile(np.eye(3), (2, 1, 1))
+    F[0, 0, 1] = 0.2
+    F[1, 0, 0] = -1.0  # a reflection: det F = -1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tau = max_shear_stress(F, MooneyRivlin(0.28, 333.0))
+    assert np.isnan(tau[1]) and np.isfinite(tau[0]) and tau[0] > 0

@@ -86,9 +86,15 @@ def sample(form: MixedForm, points: object,
 def max_shear_stress(F: np.ndarray, material: Material) -> np.ndarray:
     """``tau_max = (sigma_1 - sigma_3) / 2`` [kPa] at deformation gradients ``F`` (n, 3, 3)
     of one ``material``: the spread of the eigenvalues of the Cauchy stress's deviator
-    ``dev sigma = dev tau / det F``."""
-    S = kirchhoff_deviator(material, F) / det3(F)[:, None, None]
-    return 0.5 * (largest_eigenvalue(S) + largest_eigenvalue(-S))
+    ``dev sigma = dev tau / det F``; NaN where ``det F <= 0`` (an inverted gradient has no
+    stress; the summary leaves such points out and says how many)."""
+    J = det3(F)
+    tau = np.full(len(F), np.nan)
+    ok = J > 0
+    if ok.any():
+        S = kirchhoff_deviator(material, F[ok]) / J[ok, None, None]
+        tau[ok] = 0.5 * (largest_eigenvalue(S) + largest_eigenvalue(-S))
+    return tau
 
 
 def radial_directions(X: np.ndarray, centre: np.ndarray) -> np.ndarray:

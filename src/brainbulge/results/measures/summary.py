@@ -375,6 +375,12 @@ def solution_summary(
     if inverted:
         log.warning("%d integration point(s) inverted (J <= 0): the stress is undefined there "
                     "and left out of the stress extremes", inverted)
+    if "max_shear_stress" in fields:
+        recovered = int(np.count_nonzero(np.isnan(fields["max_shear_stress"]) & (J > 0)))
+        if recovered:
+            log.warning("%d integration point(s) with an inverted recovered gradient: the "
+                        "stress is undefined there and left out of the stress extremes",
+                        recovered)
     out["raw_max_abs_J_minus_Js"] = float(np.max(np.abs(J - Js)))
     out["max_abs_J_minus_Js"] = float(np.max(np.abs(J - Js)[keep])) if keep.any() else None
     out["integral_J_minus_Js"] = float(np.sum((J - Js) * q.weights))
