@@ -8,8 +8,9 @@ displacement's largest vertical component ``max u_y`` [R]; 3D: bulge volume and 
 alpha 80 / beta 30 and alpha 60 / beta 30, sliding and no-slip, and the headline alpha 80 /
 beta 60. Formulations compared for sliding contact (``--variants``):
 
-- ``production``: the product's path, ``brainbulge hemidisk`` (rezoning included): the
-  material arc held on the whole circle ``r <= R``, also past the opening's edge.
+- ``production``: the product's path, ``brainbulge hemidisk`` at its defaults: the skull's
+  edge rounded inside the bone, one penalty contact on the whole material arc (docs/model.md
+  section 10). The variants below are on the paper's sharp edge.
 - ``released``: the gap is the signed distance to the skull's region
   ``S = {r >= R, |delta| >= beta/2}`` (the arc and, past its edge, the edge's outward ray),
   so that a point that slides past the edge is released continuously; exact multipliers

@@ -429,7 +429,8 @@ def test_readme_python_example(capsys) -> None:
     deformed = np.sum(areas(f["points"] + f["u"]))
     assert swollen - area.sum() > 0.05 * area.sum()
     assert deformed == pytest.approx(swollen, rel=2e-3)
-    assert r.summary["max_displacement"] == pytest.approx(0.162, rel=0.02)
+    # the sliding headline's top of the bulge, 0.1562 R at h = 0.05 (docs/verification.md)
+    assert r.summary["max_displacement"] == pytest.approx(0.156, rel=0.02)
 
 
 def test_study_passes_mesh_sizes_to_its_scenarios() -> None:
