@@ -18,8 +18,6 @@ import brainbulge.solver
 from brainbulge.errors import InputError
 from brainbulge.model.options import label
 from brainbulge.solver import SolverOptions
-from brainbulge.solver.contrast import contrast_path
-from brainbulge.solver.options import ContrastOptions
 
 GROUPS = [f for f in dataclasses.fields(SolverOptions)
           if dataclasses.is_dataclass(getattr(SolverOptions(), f.name))]
@@ -28,8 +26,8 @@ LEAVES = [(g.name, type(getattr(SolverOptions(), g.name)), f)
 
 
 def test_the_tree_has_the_solvers_and_the_continuations_groups() -> None:
-    assert {g.name for g in GROUPS} >= {"ramp", "newton", "linear", "contrast", "sequencing",
-                                        "rezoning", "warm_start", "krylov", "hotspot"}
+    assert {g.name for g in GROUPS} >= {"ramp", "newton", "linear", "rezoning", "warm_start",
+                                        "krylov", "hotspot"}
     for g in GROUPS:
         group = getattr(SolverOptions(), g.name)
         with pytest.raises(dataclasses.FrozenInstanceError):
@@ -61,20 +59,6 @@ def test_each_field_has_a_default_unit_range_and_reason(group, cls, f) -> None:
     if integer:
         with pytest.raises(InputError, match="whole number"):
             cls(**{f.name: f.default + 0.5})
-
-
-def test_the_contrast_path_follows_its_options() -> None:
-    """Start and factor reach the path: 2 -> 20 in one factor of 10; a start above the
-    model's contrast leaves the model's alone."""
-    materials = {"white": _Mu(666.0), "csf": _Mu(33.3)}
-    assert contrast_path(materials, ContrastOptions(factor=10.0)) == [2.0, pytest.approx(20.0)]
-    assert contrast_path(materials, ContrastOptions(start=50.0)) == [pytest.approx(20.0)]
-    assert len(contrast_path(materials, ContrastOptions())) == 3
-
-
-@dataclasses.dataclass
-class _Mu:
-    shear_modulus: float
 
 
 def test_the_old_flat_names_set_the_groups_fields() -> None:
@@ -147,9 +131,7 @@ LOOPS = {
     "driver.py": ("walk", "fallback"),
     "newton.py": ("newton", "_iterate", "_step", "_direction", "_line_search"),
     "ramp.py": ("NewtonSolver", "LoadRamp"),
-    "contrast.py": ("ContrastPath",),
     "remesh/rezoning.py": ("RezoningRamp",),
-    "remesh/sequencing.py": ("solve_sequenced", "ramp_from_rest"),
     "warm_start.py": ("solve_from_start", "warm_start_options"),
     "strategy.py": ("Strategy", "solve"),
 }

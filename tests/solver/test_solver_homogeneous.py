@@ -302,7 +302,7 @@ def test_intermediate_load_steps_stop_at_the_looser_tolerance() -> None:
 
 
 @pytest.mark.parametrize("bad", [{"stagnation": -1}, {"stagnation": 1.5}, {"eta_max": 1.0},
-                                 {"eta_max": 1e-12}, {"carried_curvature_tolerance": 0.0}])
+                                 {"eta_max": 1e-12}])
 def test_options_out_of_range_are_refused_by_name(bad) -> None:
     (name,) = bad
     with pytest.raises(InputError, match=name):

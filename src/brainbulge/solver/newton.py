@@ -12,8 +12,7 @@ halved from 1 until the scaled residual :meth:`MixedEquations.scaled_norm
 ``1 - 1e-4 s``. With the Krylov solver the linear solve is inexact, to the relative tolerance
 of :func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with its
 :class:`Reason`, after ``max_iterations``, at a non-finite residual, when the line search
-finds no step, after ``stagnation`` short steps in a row, or when it falls short of
-``required_progress`` (:class:`SolverOptions`).
+finds no step, or after ``stagnation`` short steps in a row (:class:`SolverOptions`).
 
 :func:`newton` is a function of the equations (:class:`MixedEquations`) and their state: it
 keeps nothing between solves and returns a :class:`NewtonResult`. What is shown of a solve
@@ -53,7 +52,6 @@ class Reason(enum.Enum):
     CONVERGED = "converged"
     NOT_FINITE = "not finite"
     MAX_ITERATIONS = "max iterations"
-    TOO_SLOW = "too slow"
     LINEAR_FAILED = "linear solve failed"
     NO_STEP = "no step"
     STAGNATED = "stagnated"
@@ -88,9 +86,8 @@ class NewtonObserver:
     def iteration(self, it: int, norm: float) -> None:
         """Iterate ``it`` has scaled residual ``norm``."""
 
-    def step(self, s: float, eq: MixedEquations, eta: float | None, curvature: bool) -> None:
-        """A line-search step ``s`` was accepted (``eta``: the Krylov tolerance, or None;
-        ``curvature``: the contacts' curvature term was in the tangent)."""
+    def step(self, s: float, eq: MixedEquations, eta: float | None) -> None:
+        """A line-search step ``s`` was accepted (``eta``: the Krylov tolerance, or None)."""
 
 
 class NewtonLog(NewtonObserver):
@@ -106,12 +103,11 @@ class NewtonLog(NewtonObserver):
         log.log(logging.INFO if elapsed > self.slow_s else logging.DEBUG,
                 "    newton %d: |R| = %.3e (%.0f s)", it, norm, elapsed)
 
-    def step(self, s: float, eq: MixedEquations, eta: float | None, curvature: bool) -> None:
+    def step(self, s: float, eq: MixedEquations, eta: float | None) -> None:
         pcs = eq.contact.contacts
-        log.debug("    step %.3g, %d active contact points (%d pulling)%s%s", s,
+        log.debug("    step %.3g, %d active contact points (%d pulling)%s", s,
                   sum(int(a.sum()) for a in eq.contact.last_active),
                   sum(int((pc.lam < 0).sum()) for pc in pcs),
-                  "" if curvature or not pcs else ", no curvature",
                   "" if eta is None else f", Krylov rtol {eta:.1e}")
 
 
@@ -129,14 +125,12 @@ class _Inexact:
 
 
 def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None = None,
-           curvature_below: float = np.inf, limit_step: StepLimit | None = None,
+           limit_step: StepLimit | None = None,
            observers: Sequence[NewtonObserver] | None = None,
            relax: Callable[[ngs.BaseVector, float], float] | None = None) -> NewtonResult:
     """Solve ``R(x) = 0`` at the form's load from its current state (changed in place, with
     the contact pressures) to ``tolerance`` (default: ``options.newton.tolerance``).
 
-    ``curvature_below``: the contacts' curvature term enters the tangent only at iterates
-    whose scaled residual is at most this (a modified Newton method far from the solution).
     ``limit_step``: a factor in (0, 1] applied to each Newton update before the line search.
     ``observers``: default a :class:`NewtonLog`. ``relax(x, |R|) -> |R|``: a local solve
     after each accepted step (:mod:`brainbulge.solver.fast.hotspot`)."""
@@ -148,14 +142,13 @@ def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None =
     with nullcontext() if eq.inexact else serial_openblas():
         eta_max = options.linear.eta_max
         run = _Inexact(eta_max if eq.inexact else None, eta_max)
-        ok, its, reason, detail = _iterate(eq, options, tol, curvature_below, limit_step,
-                                           watch, relax, run)
+        ok, its, reason, detail = _iterate(eq, options, tol, limit_step, watch, relax, run)
     return NewtonResult(ok, its, tuple(run.residuals),
                         int(sum(eq.linear.stats.iterations) - linear_before), reason, detail,
                         run.tightened, None if ok else eq.residual_site(eq.state.x))
 
 
-def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below: float,
+def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
              limit_step: StepLimit | None, watch: Sequence[NewtonObserver],
              relax: Callable[[ngs.BaseVector, float], float] | None, run: _Inexact
              ) -> tuple[bool, int, Reason, str]:
@@ -175,20 +168,14 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
             return False, it, Reason.NOT_FINITE, "the residual is not finite"
         if it == nw.max_iterations:
             return False, it, Reason.MAX_ITERATIONS, f"max_iterations = {it} reached"
-        first, progress = run.residuals[0], opt.required_progress
-        if progress is not None and it == progress[0] and norm > progress[1] * first:
-            log.debug("    too slow: |R| %.3e after %d iterations from %.3e", norm, it, first)
-            return False, it, Reason.TOO_SLOW, (f"too slow: |R| above {progress[1]:g} times "
-                                                f"its first ({first:.2e})")
-        curvature = norm <= curvature_below
         try:
-            s, trial = _step(eq, opt, state.snapshot(), norm, tol, curvature, limit_step, run)
+            s, trial = _step(eq, opt, state.snapshot(), norm, tol, limit_step, run)
         except ConvergenceError as exc:
             return False, it, Reason.LINEAR_FAILED, f"the linear solve failed ({exc})"
         if s is None:
             return False, it, Reason.NO_STEP, "the line search found no step lowering |R|"
         for o in watch:
-            o.step(s, eq, run.eta, curvature)
+            o.step(s, eq, run.eta)
         # (a full step that does not halve the residual is not the Krylov tolerance's doing
         # here: from one 1.54M-tet state, GMRES at 1e-7 instead of 1e-4 gave the same
         # Newton residuals to four digits; tightening after such steps only doubled the
@@ -215,15 +202,14 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
 
 
 def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol: float,
-          curvature: bool, limit_step: StepLimit | None, run: _Inexact
+          limit_step: StepLimit | None, run: _Inexact
           ) -> tuple[float | None, float]:
     """One Newton iteration from ``x0`` (the state): the direction and its line search,
     solved again (at most three times) when the line search asks for it. Returns ``(s,
     |R(trial)|)`` of the accepted step (the state is the trial), ``s = None`` when none
-    lowers the residual (the state back at ``x0``). ``curvature``: the contacts' curvature
-    term in the tangent."""
+    lowers the residual (the state back at ``x0``)."""
     state = eq.state
-    K = eq.tangent(state.x, curvature)  # shared by the retries of this iteration
+    K = eq.tangent(state.x)  # shared by the retries of this iteration
     run.guess = None  # the last linear solution, the guess of a retry
     tightened = False
     redirections = opt.newton.redirections

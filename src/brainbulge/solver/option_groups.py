@@ -10,12 +10,11 @@ SolverOptions` holds one of each:
 - ``linear`` (:class:`LinearOptions`): the linear solver and the inexact Newton's Krylov
   tolerances (:mod:`brainbulge.solver.inexact`);
 - ``krylov``, ``hotspot``: the Krylov solver's budget and AMG, the hotspot relaxation;
-- ``contrast``, ``sequencing``, ``rezoning``, ``warm_start``: the continuations.
+- ``rezoning``, ``warm_start``: the 2D rezoning and the start from another state.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from brainbulge.errors import InputError
@@ -33,47 +32,6 @@ class OptionGroup:
 
     def __post_init__(self) -> None:
         check_ranges(self)
-
-
-@dataclass(frozen=True)
-class ContrastOptions(OptionGroup):
-    """The stiffness-contrast path of a fine stage (:mod:`brainbulge.solver.contrast`)."""
-
-    start: float = option(
-        2.0, "the contrast mu_max / mu_min the path starts from (at most the model's): white "
-        "over gray matter (666 / 333 kPa), the parenchyma's own, where the 100k-tet "
-        "template's fine stage converges from the 25k-tet state (4 Newton iterations with a "
-        "2 or 8 mm edge); the upper bound: the model's contrast alone, no path",
-        unit=RATIO, range=(1.0, 1e6))
-    factor: float = option(
-        math.sqrt(10.0), "growth of the contrast per step (2 -> 6.3 -> 20 for the brain's "
-        "CSF)", unit=RATIO, range=(1.01, 1e3))
-    progress_iterations: int = option(
-        3, "each step's Newton solve gives up when its scaled residual is not below "
-        "progress_factor times its first after this many iterations (the converged steps "
-        "logged on the 100k- and 1.40M-tet templates fell 40-18,000x in 3)",
-        unit=" iterations", range=(1, 100))
-    progress_factor: float = option(
-        0.1, "the fall of the scaled residual each step requires within progress_iterations "
-        "(the converged steps fell to 2e-3-3e-2 of their first)", unit=RATIO,
-        range=(0.0, 1.0))
-
-
-@dataclass(frozen=True)
-class SequencingOptions(OptionGroup):
-    """Mesh sequencing, coarse mesh to fine (:mod:`brainbulge.solver.remesh.sequencing`)."""
-
-    coarse_tolerance: float = option(
-        1e-4, "the coarse stage's Newton tolerance on the scaled residual (never tighter "
-        "than the solve's): its state is only where the fine mesh starts, whose carried-over "
-        "residual is ~1e-2 (1.7e-2 at 1.40M from 111k tets, the same to four digits from a "
-        "coarse state at 1e-7); the 111k coarse ramp takes 6 Newton iterations instead of 9",
-        unit=RATIO, range=(1e-14, 1e-1))
-    fold_ratio: float = option(
-        0.2, "a contact point moved onto the obstacle goes back if an element of it is left "
-        "with less than this fraction of its reference measure (and less than before the "
-        "move): 18 folded tets at 1.40M under the skull's 2 mm rounded cut edge without it",
-        unit=RATIO, range=(0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -217,13 +175,6 @@ class NewtonOptions(OptionGroup):
         1e-9, "on the scaled residual at full load (force / (mu L^(d-1)), volume / |Omega|): "
         "round-off of the assembled residual sits near 1e-12, the summaries' numbers are "
         "converged to their printed digits", unit=RATIO, range=(1e-14, 1e-1))
-    carried_curvature_tolerance: float = option(
-        1e-3, "from a carried-over state (mesh sequencing) the contacts' curvature term "
-        "enters the tangent only once the scaled residual is at most this: the exact "
-        "direction slid rim points by 5-8 mm along the skull's rounded cut edge and folded "
-        "elements (1.54M tets, 10 iterations); without the term far from the solution the "
-        "stage takes 6", unit=RATIO, range=(1e-14, 1e3),
-        label="carried_curvature_tolerance")
     stagnation: int = option(
         4, "an attempt stops, as failed, after this many Newton iterations in a row whose "
         "line search took at most short_step and that together lowered the residual by less "

@@ -30,7 +30,6 @@ import time
 from pathlib import Path
 
 import ngsolve as ngs
-import numpy as np
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
@@ -71,13 +70,13 @@ class NewtonSolver:
         #: the trust region on each update (option ``newton.step_cap``)
         self.step_cap = StepCap(form, cap) if cap > 0 else None
 
-    def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
+    def newton(self, tolerance: float | None = None,
                limit_step: StepLimit | None = None) -> NewtonResult:
         """One Newton solve at the form's load from its state (:func:`newton`), each update
         within the options' step cap unless ``limit_step`` is given."""
         relax = None if self.relaxation is None else self.relaxation.relax
-        return newton(self.equations, self.opt, tolerance, curvature_below,
-                      limit_step or self.step_cap, relax=relax)
+        return newton(self.equations, self.opt, tolerance, limit_step or self.step_cap,
+                      relax=relax)
 
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (:meth:`MixedEquations.release_linear_solver`)."""
@@ -92,20 +91,16 @@ class NewtonSolver:
         sol = walk(LoadRamp(self))
         return finished(self.equations, sol, start)
 
-    def equilibrate(self, curvature_below: float | None = None) -> Solution:
-        """Newton at the form's current load from its current state (one carried over
-        from another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's
-        solution), to the final tolerance, without load steps, the curvature term of the
-        contacts entering the tangent only below ``curvature_below`` (default
-        ``newton.carried_curvature_tolerance``; ``inf``: always). On failure the state is
+    def equilibrate(self) -> Solution:
+        """Newton at the form's current load from its current state (another flap's
+        solution), to the final tolerance, without load steps. On failure the state is
         restored and ``converged`` is false."""
         form, state = self.form, self.state
         start = time.perf_counter()
         t = state.load
         sol = Solution(form=form, load=t, converged=False)
         before = state.snapshot()
-        res = self.newton(curvature_below=(self.opt.newton.carried_curvature_tolerance
-                                           if curvature_below is None else curvature_below))
+        res = self.newton()
         sol.newton_results.append(res)
         if res.converged:
             pen = self.equations.max_penetration() if form.contacts_present else 0.0

@@ -5,9 +5,7 @@ A start at full load converges in a few Newton iterations when it is close (a sm
 at the same centre), or not at all; so Newton from it runs with a small budget
 (:class:`~brainbulge.solver.options.WarmStartOptions`: ``max_iterations`` Newton and
 ``krylov_iterations`` GMRES iterations per linear solve), a failed Krylov solve is not
-retried, and the contacts' curvature term is in the tangent from the first iteration (the
-start is another equilibrium, not a state carried over from a coarser mesh). If that does not
-converge, the state is reset and the load ramped as without a start.
+retried. If that does not converge, the state is reset and the load ramped as without a start.
 """
 
 from __future__ import annotations
@@ -15,8 +13,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Callable
-
-import numpy as np
 
 from brainbulge.solver.driver import fallback
 from brainbulge.solver.mixed import MixedForm
@@ -51,7 +47,7 @@ def solve_from_start(form: MixedForm, options: SolverOptions,
             return None
         # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
         solver = NewtonSolver(form, warm_start_options(options))
-        sol = solver.equilibrate(curvature_below=np.inf)  # the exact tangent throughout
+        sol = solver.equilibrate()
         started = sol.converged
         solver.release_linear_solver()
         if not sol.converged:

@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 import ngsolve as ngs
 import numpy as np
 from netgen.libngpy._meshing import NgException
+from scipy.spatial import cKDTree
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.geometry.rezone import (
@@ -43,7 +44,6 @@ from brainbulge.solver.driver import Tried, walk
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import FULL, LoadRamp, NewtonSolver, check_feasible, costs_of, finished
-from brainbulge.solver.remesh.sequencing import carry_contact_pressures
 from brainbulge.solver.state import Snapshot
 
 log = logging.getLogger("brainbulge")
@@ -256,3 +256,12 @@ def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
     new.set_load(old.load.Get())
     carry_contact_pressures(old, new)
 
+
+def carry_contact_pressures(old: MixedForm, new: MixedForm) -> None:
+    """Each of ``new``'s contact points takes the pressure of ``old``'s nearest one (at the
+    deformed positions of both states)."""
+    for pc_old, pc_new in zip(old.point_contacts, new.point_contacts, strict=True):
+        pc_old.update(old.gfu.vec.FV().NumPy())
+        pc_new.update(new.gfu.vec.FV().NumPy())
+        _, idx = cKDTree(pc_old.x).query(pc_new.x)
+        pc_new.lam = pc_old.lam[idx].copy()
