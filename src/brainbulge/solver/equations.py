@@ -155,7 +155,7 @@ class MixedEquations:
         Static condensation (MINI's bubbles) extends the right-hand side before and the
         solution after the solve; the contact rows come from :meth:`ActiveSet.linearize`.
         ``guess``: the linear system's solution of a retry at the same state (another active
-        set, or a tighter tolerance), an initial guess for an iterative solver solving to the
+        set), an initial guess for an iterative solver solving to the
         relative tolerance ``rtol``.
         """
         if K is None:  # a retry at the same state (new active set) reuses the tangent

@@ -5,8 +5,8 @@ SolverOptions` holds one of each:
 
 - ``ramp`` (:class:`RampOptions`): the load ramp's steps and the driver's step control (cut,
   growth) (:mod:`brainbulge.solver.ramp`, :mod:`brainbulge.solver.driver`);
-- ``newton`` (:class:`NewtonOptions`): Newton's iterations, tolerances, line search and
-  stagnation stop (:mod:`brainbulge.solver.newton`);
+- ``newton`` (:class:`NewtonOptions`): Newton's iterations, tolerances and line search
+  (:mod:`brainbulge.solver.newton`);
 - ``linear`` (:class:`LinearOptions`): the linear solver and the inexact Newton's Krylov
   tolerances (:mod:`brainbulge.solver.inexact`);
 - ``krylov``, ``hotspot``: the Krylov solver's budget and AMG, the hotspot relaxation;
@@ -175,20 +175,6 @@ class NewtonOptions(OptionGroup):
         1e-9, "on the scaled residual at full load (force / (mu L^(d-1)), volume / |Omega|): "
         "round-off of the assembled residual sits near 1e-12, the summaries' numbers are "
         "converged to their printed digits", unit=RATIO, range=(1e-14, 1e-1))
-    stagnation: int = option(
-        4, "an attempt stops, as failed, after this many Newton iterations in a row whose "
-        "line search took at most short_step and that together lowered the residual by less "
-        "than stagnation_progress (0: never); where the load path folds, the 2D alpha 80 / "
-        "beta 30 runs spent all 20 iterations on 0.1-0.4 % steps, attempt after attempt",
-        unit=" iterations", range=(0, 1000))
-    stagnation_progress: float = option(
-        0.95, "a run of short steps counts as stagnating while the residual stays above "
-        "this fraction of where the run began (less than 5 % lower)", unit=RATIO,
-        range=(0.0, 1.0), label="stagnation_progress")
-    short_step: float = option(
-        1 / 64, "a line-search step of at most this is short (six halvings): it moves the "
-        "state but says the direction is poor", unit=RATIO, range=(0.0, 1.0),
-        label="short_step")
     min_line_step: float = option(
         1 / 1024, "the line search gives up below this step (ten halvings): a smaller step "
         "changes the residual only by round-off", unit=RATIO, range=(1e-12, 1.0),
@@ -201,9 +187,9 @@ class NewtonOptions(OptionGroup):
         "(1 - armijo s) |R_0| (the textbook value, Nocedal & Wright)", unit=RATIO,
         range=(0.0, 0.5))
     redirections: int = option(
-        3, "times one Newton iteration's direction may be solved again (penetrating points "
-        "forced active, or a loose Krylov direction solved tighter) before its line search "
-        "must decide", unit=" solves", range=(0, 100))
+        3, "times one Newton iteration's direction may be solved again with penetrating "
+        "points forced active before its line search must decide", unit=" solves",
+        range=(0, 100))
     slow_newton_s: float = option(
         30.0, "a Newton solve running longer than this logs each iteration at INFO (else "
         "DEBUG), so a long fine-mesh solve shows its progress (negative: always)",
@@ -239,21 +225,13 @@ class LinearOptions(OptionGroup):
         "cases' default from 400k tets, where PARDISO runs out of memory)",
         choices=LINEAR_SOLVERS, label="linear_solver")
     eta_min: float = option(
-        1e-10, "the tightest relative tolerance of an inexact Newton's Krylov solve (a "
-        "retry after a failed solve, the floor of the forcing term): near GMRES's "
-        "round-off at 1e6 unknowns", unit=RATIO, range=(1e-16, 1e-2), label="eta_min")
+        1e-10, "the tightest relative tolerance of an inexact Newton's Krylov solve (the "
+        "floor of the forcing term): near GMRES's round-off at 1e6 unknowns", unit=RATIO,
+        range=(1e-16, 1e-2), label="eta_min")
     eta_max: float = option(
         1e-4, "the loosest relative tolerance of an inexact Newton's Krylov solve (the "
         "forcing term's cap): with the floor winning instead a 1.19M-tet brain's Newton "
         "stalled at |R| 1.5e-7", unit=RATIO, range=("eta_min", 0.999), label="eta_max")
-    tighten: float = option(
-        1e-2, "a loose Krylov direction whose line search found no step is solved again "
-        "this factor tighter (once per iteration; at every short step instead cost a "
-        "1.54M-tet run 812 s for the same 1/16 step)", unit=RATIO, range=(1e-8, 1.0))
-    retry: bool = option(
-        True, "a failed Krylov solve is retried once, at eta_min, with a fresh "
-        "preconditioner (False: the Newton solve fails at once, e.g. from a start state "
-        "that a ramp can replace)", label="retry_linear")
 
     def __post_init__(self) -> None:
         super().__post_init__()

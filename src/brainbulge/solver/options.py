@@ -56,13 +56,11 @@ SHORTHAND = {
     "intermediate_tolerance": ("ramp", "intermediate_tolerance"),
     "max_iterations": ("newton", "max_iterations"),
     "tolerance": ("newton", "tolerance"),
-    "stagnation": ("newton", "stagnation"),
     "slow_newton_s": ("newton", "slow_newton_s"),
     "closed_form": ("newton", "closed_form"),
     "hotspot_relaxation": ("newton", "hotspot_relaxation"),
     "linear_solver": ("linear", "solver"),
     "eta_max": ("linear", "eta_max"),
-    "retry_linear": ("linear", "retry"),
 }
 
 
@@ -151,7 +149,7 @@ class Failure:
     #: the last Newton attempt's scaled residual [-] and iterations when it gave up
     residual: float = float("nan")
     iterations: int = 0
-    #: why that attempt gave up (e.g. "stagnated: ...", "max_iterations = 20 reached")
+    #: why that attempt gave up (e.g. "max_iterations = 20 reached")
     reason: str = ""
 
     def describe(self, advice: str = DIVERGENCE_ADVICE) -> str:

@@ -4,8 +4,8 @@ load ramp from ``Js = 1``.
 A start at full load converges in a few Newton iterations when it is close (a smaller flap
 at the same centre), or not at all; so Newton from it runs with a small budget
 (:class:`~brainbulge.solver.options.WarmStartOptions`: ``max_iterations`` Newton and
-``krylov_iterations`` GMRES iterations per linear solve), a failed Krylov solve is not
-retried. If that does not converge, the state is reset and the load ramped as without a start.
+``krylov_iterations`` GMRES iterations per linear solve). If that does not converge, the
+state is reset and the load ramped as without a start.
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ def warm_start_options(options: SolverOptions) -> SolverOptions:
     warm = options.warm_start
     return dataclasses.replace(
         options, newton=dataclasses.replace(options.newton, max_iterations=warm.max_iterations),
-        linear=dataclasses.replace(options.linear, retry=False),
         krylov=dataclasses.replace(options.krylov, max_iterations=warm.krylov_iterations))
 
 
