@@ -7,8 +7,7 @@ load factor by ``dt``, predicts the new state by extrapolating the last incremen
 
     x_pred = x_prev + (dt / dt_last) (x_prev - x_before),
 
-and solves from it (without ``predictor``: from the last converged state); if that fails,
-once more from the last converged state. A step that still
+and solves from it (without ``predictor``: from the last converged state). A step that
 fails is cut, ``dt <- cut dt``, and retried from the last converged state; a step that
 converged within ``fast_iterations`` lets the next grow, ``dt <- grow dt`` (``options.ramp``:
 0.5, 4 and 1.5), or, with ``slide``, the next step is sized by how far the last one moved
@@ -181,9 +180,8 @@ class LoadRamp:
 
     def attempt(self, t: float, dt: float, last: Snapshot) -> Tried:
         """Newton at load ``t`` (a step ``dt`` on) from the predicted state, extrapolating
-        the last increment, ``x_pred = x_last + (dt / dt_last) increment``, and, if that
-        fails, once more from the last converged state ``last`` (its ``x`` at the new load's
-        prescribed values, with the failed attempt's contact pressures)."""
+        the last increment, ``x_pred = x_last + (dt / dt_last) increment`` (``last``: the
+        last converged state)."""
         form, opt, state = self.form, self.opt, self.state
         sol_results = self.sol.newton_results
         form.set_load(t)
@@ -195,17 +193,10 @@ class LoadRamp:
         tol = newton_tol if t >= FULL else max(newton_tol, opt.ramp.intermediate_tolerance)
         res = self.solver.newton(tol)
         sol_results.append(res)
-        its = res.iterations
-        if not res.converged and self.predictor is not None and opt.ramp.predictor:
-            state.restore(last, multipliers=False)
-            form.set_load(t)
-            res = self.solver.newton(tol)
-            sol_results.append(res)
-            its += res.iterations
         motion = None
         if res.converged and self.slide is not None:
             motion = self.slide(last.x.FV().NumPy(), state.x.FV().NumPy())
-        return Tried(res.converged, its, res, motion)
+        return Tried(res.converged, res.iterations, res, motion)
 
     def accept(self, t: float, dt: float, last: Snapshot, tried: Tried,
                sol: Solution) -> None:
