@@ -101,10 +101,6 @@ class KrylovOptions(OptionGroup):
         200, "GMRES restart length (basis vectors kept: 1.7 GB at 1.08M unknowns); with 100 "
         "the 1.40M-tet brain's fine-stage tangent stalled at 5.6e-2 after 200 iterations, it "
         "converges in 157 without a restart", unit=" vectors", range=(1, 100_000))
-    refresh_factor: float = option(
-        1.5, "rebuild the AMG hierarchies when a solve takes more than this times the "
-        "iterations of the first solve after the last set-up; no other value measured",
-        unit=RATIO, range=(1.0, 1e3))
     schur_drop: float = option(
         0.05, "couplings of the SIMPLE Schur approximation weaker than this times "
         "sqrt(|S_ii S_jj|) are lumped onto the diagonal before its AMG: on the 111k-tet "
