@@ -60,6 +60,7 @@ VARIANTS: dict[str, dict[str, object]] = {
     "tight-intermediate": {"ramp.intermediate_tolerance": 1e-9},
     "no-line-search": {"newton.line_search": False},
     "no-step-cap": {"newton.step_cap": 0.0},
+    "no-forced-active": {"newton.redirections": 0},
     "no-hotspot": {"newton.hotspot_relaxation": False},
     "no-inexact": {"linear.eta_max": 1e-10},
 }

@@ -111,10 +111,12 @@ class NewtonLog(NewtonObserver):
 
 @dataclass
 class _Inexact:
-    """One solve's inexact-Newton control, the Krylov tolerance ``eta`` (None with a direct
-    solver), and each iterate's scaled residual."""
+    """One solve's inexact-Newton controls: the Krylov tolerance ``eta`` (None with a
+    direct solver), the last linear solution (the guess of a retry at the same state) and
+    each iterate's scaled residual."""
 
     eta: float | None
+    guess: np.ndarray | None = None
     residuals: list[float] = field(default_factory=list)
 
 
@@ -147,6 +149,7 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
              ) -> tuple[bool, int, Reason, str]:
     """:func:`newton`'s loop: (converged, iterations, reason, detail)."""
     state, nw = eq.state, opt.newton
+    eq.contact.start_solve()
     eq.linear.new_load_step()
     norm = eq.scaled_norm(eq.residual(state.x))
     for it in range(nw.max_iterations + 1):
@@ -177,36 +180,48 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
         norm = trial
         if relax is not None and norm > tol:
             norm = relax(state.x, norm)
+        eq.contact.let_pulling_go()
     raise AssertionError("unreachable: the loop returns at its last iteration")
 
 
 def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol: float,
           limit_step: StepLimit | None, run: _Inexact
           ) -> tuple[float | None, float]:
-    """One Newton iteration from ``x0`` (the state): the direction, scaled by
-    ``limit_step``, and its line search. Returns ``(s, |R(trial)|)`` of the accepted step
-    (the state is the trial), ``s = None`` when none lowers the residual (the state back at
-    ``x0``)."""
+    """One Newton iteration from ``x0`` (the state): the direction and its line search,
+    solved again (at most three times) when the line search asks for it. Returns ``(s,
+    |R(trial)|)`` of the accepted step (the state is the trial), ``s = None`` when none
+    lowers the residual (the state back at ``x0``)."""
     state = eq.state
-    dx, dlams, _ = eq.newton_direction(state.x, eq.tangent(state.x), None, run.eta)
-    if limit_step is not None:
-        f = limit_step(state.x, dx)
-        if f < 1:
-            dx.data = f * dx
-            dlams = [f * d for d in dlams]
-    return _line_search(eq, state, x0, dx, dlams, norm, tol, opt)
+    K = eq.tangent(state.x)  # shared by the retries of this iteration
+    run.guess = None  # the last linear solution, the guess of a retry
+    redirections = opt.newton.redirections
+    for attempt in range(redirections + 1):
+        dx, dlams, run.guess = eq.newton_direction(state.x, K, run.guess, run.eta)
+        if limit_step is not None:
+            f = limit_step(state.x, dx)
+            if f < 1:
+                dx.data = f * dx
+                dlams = [f * d for d in dlams]
+        s, trial = _line_search(eq, state, x0, dx, dlams, norm, tol,
+                                retry=attempt < redirections, opt=opt)
+        if s is None or s > 0:
+            return s, trial
+        state.restore(x0)  # retry the direction at x0
+        eq.residual(state.x)
+    raise AssertionError("unreachable: the last attempt accepts a step or gives up")
 
 
 def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVector,
-                 dlams: list[np.ndarray], norm: float, tol: float, opt: SolverOptions
-                 ) -> tuple[float | None, float]:
+                 dlams: list[np.ndarray], norm: float, tol: float, retry: bool,
+                 opt: SolverOptions) -> tuple[float | None, float]:
     """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
     ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
 
     Without ``options.newton.line_search`` the update is taken as it is where its residual
     is finite. Returns ``(s, |R(trial)|)``: ``s > 0`` accepted (the state is the trial);
-    ``s = None`` when no step of at least 1/1024 lowers the residual (the state back at
-    ``x0``).
+    ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
+    penetrating points were forced active; ``s = None`` when no step of at least 1/1024
+    lowers the residual (the state back at ``x0``).
     """
     x, nw = state.x, opt.newton
     s = 1.0
@@ -218,6 +233,8 @@ def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVec
             return s, trial
         if not nw.line_search and np.isfinite(trial):  # the (capped) update as it is
             return s, trial
+        if s == 1.0 and retry and eq.contact.force_penetrating():
+            return 0.0, trial
         s *= nw.backtrack
         if s < nw.min_line_step:
             state.restore(x0)

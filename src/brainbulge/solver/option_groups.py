@@ -182,6 +182,10 @@ class NewtonOptions(OptionGroup):
         1e-4, "sufficient decrease: a step s is accepted when |R| falls below "
         "(1 - armijo s) |R_0| (the textbook value, Nocedal & Wright)", unit=RATIO,
         range=(0.0, 0.5))
+    redirections: int = option(
+        3, "times one Newton iteration's direction may be solved again with penetrating "
+        "points forced active before its line search must decide", unit=" solves",
+        range=(0, 100))
     slow_newton_s: float = option(
         30.0, "a Newton solve running longer than this logs each iteration at INFO (else "
         "DEBUG), so a long fine-mesh solve shows its progress (negative: always)",

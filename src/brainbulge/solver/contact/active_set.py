@@ -25,8 +25,8 @@ from brainbulge.solver.linear.sparse_reuse import PatternProject
 
 
 class ActiveSet:
-    """The contact points of a form whose DOFs are ``free`` (of ``ndof``) and their active
-    set.
+    """The contact points of a form whose DOFs are ``free`` (of ``ndof``), their active set,
+    and the points forced into it for one Newton solve.
 
     A point on a clamped edge (no free DOF) does not move: it takes no constraint.
     """
@@ -45,6 +45,10 @@ class ActiveSet:
         ]
         #: per contact, ``A C / c`` of the moving points at the last residual [volume]
         self.complementarity: list[np.ndarray] = []
+        #: per contact, inactive points that a full Newton step pushed into the skull, forced
+        #: active for the rest of the solve (left alone, such a weakly active point makes
+        #: the active set cycle and the line search halve every step)
+        self.forced = [np.zeros(pc.n_points, dtype=bool) for pc in self.contacts]
         #: per contact, the active points of the last Newton step
         self.last_active: list[np.ndarray] = []
 
@@ -69,6 +73,28 @@ class ActiveSet:
             out.append(-pc.curvature())
         return out
 
+    def start_solve(self) -> None:
+        """No point forced active at the start of a Newton solve."""
+        self.forced = [np.zeros(pc.n_points, dtype=bool) for pc in self.contacts]
+
+    def let_pulling_go(self) -> None:
+        """A forced point that pulls (``lambda < 0``) is no longer forced."""
+        for forced, pc in zip(self.forced, self.contacts, strict=True):
+            forced &= pc.lam >= 0
+
+    def force_penetrating(self) -> bool:
+        """Force into the active set the inactive points that penetrate at the current
+        (trial) state; True if there were any."""
+        any_new = False
+        tol = 1e-6 * self.h
+        for pc, forced, act, moving in zip(self.contacts, self.forced, self.last_active,
+                                           self.moving, strict=True):
+            new = ~act & (pc.g < -tol) & moving
+            if new.any():
+                forced |= new
+                any_new = True
+        return any_new
+
     def max_penetration(self) -> float:
         """Largest penetration ``max(-g, 0)`` of the moving points at the form's state
         [length] (a clamped point may overlap the skull at rest by the surface's geometric
@@ -82,8 +108,8 @@ class ActiveSet:
         (full numbering, in place)."""
         step = ContactStep()
         self.last_active = []
-        for pc, moving in zip(self.contacts, self.moving, strict=True):
-            act = pc.active(self.c_active) & moving
+        for pc, forced, moving in zip(self.contacts, self.forced, self.moving, strict=True):
+            act = (pc.active(self.c_active) | forced) & moving
             self.last_active.append(act)
             pc.add_forces(rhs, -np.where(act, 0.0, pc.lam))  # + B_I^T lam_I
             step.dlams.append(pc.lam.copy())  # inactive: to zero
