@@ -14,18 +14,12 @@ Variants (the same mesh, model and outputs):
 - ``krylov``: MINI, compiled, GMRES with AMG blocks at Eisenstat-Walker tolerances;
 - ``th-krylov``: Taylor-Hood, compiled, GMRES with a two-level cycle on the P2 block (the
   P1 part's AMG inside Gauss-Seidel sweeps): a Taylor-Hood reference on meshes beyond
-  PARDISO's reach here;
-- ``sequenced``: ``krylov`` with mesh sequencing: the load ramped first on a mesh of about
-  ``--coarse-tets`` tets (built or reused from the cache like the fine one), the fine mesh's
-  Newton started at full load from that solution. Its solve time includes the coarse stage;
-  its Newton iterations are the fine mesh's.
+  PARDISO's reach here.
 
 ``--refine K`` builds the fine meshes by Netgen at N / 8^K and K uniform refinements
-(cached as ``brain_N_rK``); with ``--coarse-tets N / 8^K`` the sequenced variant's meshes
-are nested; with ``--flat`` the new surface nodes stay at their midpoints (cached as
-``brain_N_rK_flat``): every mesh of the family has the Netgen mesh's geometry exactly, as a
-Taylor-Hood solution on it sees it (a comparison of elements on one geometry; with
-``--coarse-tets N / 8^j`` the sequenced variant's coarse mesh is the family's member).
+(cached as ``brain_N_rK``); with ``--flat`` the new surface nodes stay at their midpoints
+(cached as ``brain_N_rK_flat``): every mesh of the family has the Netgen mesh's geometry
+exactly, as a Taylor-Hood solution on it sees it (a comparison of elements on one geometry).
 ``BRAINBULGE_KEEP_HEAP=0`` in the environment returns freed arrays to the system (glibc's
 default; ``brainbulge.heap`` keeps them: faster, a little more memory).
 
@@ -57,7 +51,6 @@ VARIANTS = {
     "direct": {"element": "mini", "linear_solver": "pardiso", "compile": True},
     "krylov": {"element": "mini", "linear_solver": "krylov", "compile": True},
     "th-krylov": {"element": "taylor-hood", "linear_solver": "krylov", "compile": True},
-    "sequenced": {"element": "mini", "linear_solver": "krylov", "compile": True},
 }
 
 
@@ -85,7 +78,7 @@ def cached_mesh(target_tets: int, cache: Path, refine: int = 0, flat: bool = Fal
 
 def one(target_tets: int, steps: int, cache: Path, variant: str,
         edge_radius_mm: float = EDGE_RADIUS_MM, resume: bool = False,
-        coarse_tets: int = 100_000, refine: int = 0, tolerance: float = 1e-9,
+        refine: int = 0, tolerance: float = 1e-9,
         flat: bool = False) -> dict:
     import logging
 
@@ -101,12 +94,6 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         logging.getLogger(noisy).setLevel(logging.WARNING)
     t0 = time.perf_counter()
     bm = cached_mesh(target_tets, cache, refine, flat)
-    if variant != "sequenced":
-        coarse = None
-    else:  # with --flat, N / 8^j is the family's member refined K - j times
-        j = next((j for j in range(1, refine + 1) if coarse_tets * 8**j == target_tets), 0)
-        coarse = (cached_mesh(coarse_tets, cache, refine - j, flat=refine > j) if flat and j
-                  else cached_mesh(coarse_tets, cache))
     t_mesh = time.perf_counter() - t0
     out = cache / f"run_{tag}_{variant}"
     restart = out / "restart.npz"  # left by a run that was stopped
@@ -117,7 +104,7 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         s = run_brain({"flap": "left", "swell": "both", "steps": steps,
                        "edge_radius_mm": edge_radius_mm, "tolerance": tolerance,
                        **VARIANTS[variant]},
-                      out, brain_mesh=bm, coarse_brain_mesh=coarse)
+                      out, brain_mesh=bm)
     except ConvergenceError:  # stopped before Js = 1.1: its partial summary is on disk
         s = json.loads((out / "summary.json").read_text())
     t_run = time.perf_counter() - t1
@@ -131,7 +118,6 @@ def one(target_tets: int, steps: int, cache: Path, variant: str,
         "penetration_mm": s["max_penetration_mm"], "variant": variant,
         # the solver's word: a restart file of another problem is not resumed
         "resumed_at": s.get("resumed_from_load", 0.0), "load_reached": s.get("load_reached", 1.0),
-        "sequencing": s.get("mesh_sequencing"),
     }
 
 
@@ -159,11 +145,8 @@ def main() -> int:
     parser.add_argument("--edge-radius", type=float, default=EDGE_RADIUS_MM,
                         help="rounded cut edge of the skull at the flap [mm] (the brain "
                              "command's --skull-edge-radius)")
-    parser.add_argument("--coarse-tets", type=int, default=100_000,
-                        help="coarse mesh of the sequenced variant (about this many tets)")
     parser.add_argument("--refine", type=int, default=0, metavar="K",
-                        help="fine meshes by K uniform refinements of Netgen's mesh at N / 8^K "
-                             "(with --coarse-tets N / 8^K the sequenced meshes are nested)")
+                        help="fine meshes by K uniform refinements of Netgen's mesh at N / 8^K")
     parser.add_argument("--flat", action="store_true",
                         help="with --refine: new surface nodes stay at their midpoints (the "
                              "Netgen mesh's geometry exactly)")
@@ -177,7 +160,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.one:
         r = one(args.one, args.steps, args.cache, args.variants[0], args.edge_radius,
-                args.resume, args.coarse_tets, args.refine, args.tolerance, args.flat)
+                args.resume, args.refine, args.tolerance, args.flat)
         print("RESULT " + json.dumps(r), flush=True)
         return 0
     print(HEADER, flush=True)
@@ -185,7 +168,7 @@ def main() -> int:
     for n, variant in ((n, v) for n in args.sizes for v in args.variants):
         cmd = [sys.executable, __file__, "--one", str(n), "--steps", str(args.steps),
                "--cache", str(args.cache), "--variants", variant,
-               "--edge-radius", str(args.edge_radius), "--coarse-tets", str(args.coarse_tets),
+               "--edge-radius", str(args.edge_radius),
                "--refine", str(args.refine), "--tolerance", str(args.tolerance)]
         cmd += ["--resume"] if args.resume else []
         cmd += ["--flat"] if args.flat else []
@@ -200,14 +183,6 @@ def main() -> int:
         if not results[n, variant]["converged"]:
             print(f"{'':>8} {variant:>8}: stopped at load {results[n, variant]['load_reached']:.3f}"
                   " (partial run: compare its time per Newton iteration)", flush=True)
-        seq = results[n, variant].get("sequencing")
-        if seq:
-            print(f"{'':>8} {variant:>9}: coarse mesh {seq['coarse_elements']} tets, "
-                  f"{seq['coarse_newton_iterations']} Newton iterations, "
-                  f"{seq['coarse_wall_time_s']:.0f} s; carried-over |R| "
-                  f"{seq['initial_residual'] or float('nan'):.1e}; fine Newton from it "
-                  f"{'converged' if seq['fine_converged'] else 'failed (ramped instead)'}",
-                  flush=True)
         if results[n, variant].get("resumed_at"):
             print(f"{'':>8} {variant:>8}: resumed at load {results[n, variant]['resumed_at']:.3f}"
                   "; the times above are of this part only", flush=True)
@@ -222,8 +197,6 @@ def main() -> int:
                     print(f"{n:>8} {v:>8}: {base['solve_s'] / r['solve_s']:.1f}x faster than "
                           f"the baseline in the solve, {base['run_s'] / r['run_s']:.1f}x in the "
                           "whole run", flush=True)
-                if v == "sequenced":  # its solve time includes the coarse mesh's
-                    continue
                 per_it = [x["solve_s"] / max(x["newton"], 1) for x in (base, r)]
                 print(f"{n:>8} {v:>8}: {per_it[0] / per_it[1]:.1f}x faster per Newton iteration "
                       f"({per_it[0]:.1f} s against {per_it[1]:.1f} s)", flush=True)

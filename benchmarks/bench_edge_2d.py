@@ -213,7 +213,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
     radius = [trust]  # the trust region's radius, in local edge lengths
     original = newton_mod._line_search
 
-    def capped(eq, state, x0, dx, dlams, norm, tol, retry, tightened, run, opt):
+    def capped(eq, state, x0, dx, dlams, norm, tol, retry, opt):
         """Newton's line search (solver/newton.py) with the prototype's step bounds before it
         (or instead of it, without the line search); ``x0`` the state's snapshot."""
         x = state.x
@@ -271,8 +271,8 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             if trust_max > trust:  # the radius grows while the residual falls
                 radius[0] = (min(2 * radius[0], trust_max) if trial < norm
                              else max(radius[0] / 2, trust))
-            return 1.0, trial, tightened
-        out = original(eq, state, x0, dx, dlams, norm, tol, retry, tightened, run, opt)
+            return 1.0, trial
+        out = original(eq, state, x0, dx, dlams, norm, tol, retry, opt)
         record(f * (out[0] or 0.0), out[1])
         return out
 

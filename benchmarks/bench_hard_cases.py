@@ -42,11 +42,10 @@ largest difference of ``u_y`` between mirrored vertices, relative to the largest
 3D rows (:mod:`bench_hard_cases_3d`; with any of them the 2D cases run only if ``--cases``
 names some): ``--3d``, the six craniectomy scenarios on the demo's 21k-tet brain;
 ``--flap``, the planner's 80 mm flap at its one-centre placement on the 111k-tet template;
-``--edge-radius``, a 2 mm edge at 111k tets, load ramped and mesh-sequenced from 20k tets
-without the contrast path; ``--taylor-hood``, the six scenarios with Taylor-Hood at 21k tets
-(``--th-scenarios`` picks some); ``--long``, Taylor-Hood at 175k tets and the default
-scenario mesh-sequenced at 1.40M tets (hours). They print converged, load, Newton (and
-the coarse stage's) and GMRES iterations, the final scaled residual, solve and run time,
+``--edge-radius``, a 2 mm edge at 111k tets, the load ramped; ``--taylor-hood``, the six
+scenarios with Taylor-Hood at 21k tets (``--th-scenarios`` picks some); ``--long``,
+Taylor-Hood at 175k tets and the default scenario at 1.40M tets (hours). They print
+converged, load, Newton and GMRES iterations, the final scaled residual, solve and run time,
 peak memory, bulge volume, Monro shift and (planner) strained volume.
 
 Rerun with ``python benchmarks/bench_hard_cases.py`` (the 2D rows, about 25 min on 2
@@ -320,13 +319,13 @@ def parser() -> argparse.ArgumentParser:
                     help="the edge-vertex variants' blend (parameter distance from a vertex)")
     ap.add_argument("--flap", action="store_true", help="the planner's 80 mm flap, 111k tets")
     ap.add_argument("--edge-radius", action="store_true",
-                    help="a 2 mm edge at 111k tets: ramped, and sequenced without contrast path")
+                    help="a 2 mm edge at 111k tets, the load ramped")
     ap.add_argument("--taylor-hood", action="store_true",
                     help="the six scenarios with Taylor-Hood at 21k tets")
     ap.add_argument("--th-scenarios", nargs="+", default=list(h3.SCENARIO_NAMES),
                     choices=h3.SCENARIO_NAMES, help="the Taylor-Hood rows' scenarios")
     ap.add_argument("--long", action="store_true",
-                    help="Taylor-Hood at 175k and the 1.40M-tet sequenced default (hours)")
+                    help="Taylor-Hood at 175k and the 1.40M-tet default (hours)")
     ap.add_argument("--cache", type=Path, default=None,
                     help="folder of the 3D rows' meshes, kept (default: a temporary one)")
     ap.add_argument("--keep", type=Path, default=None,

@@ -9,17 +9,12 @@ Cases (``RUNS``; each a flag of ``bench_hard_cases.py``):
   placement over the left white matter (``brainbulge plan --swell left --centres 1
   --diameters 80``, serial) on the 100k-tet template (111k tets); GMRES + AMG, 8 mm edge.
 - ``edge-radius`` (``--edge-radius``): the default scenario (left flap, both-sided
-  swelling) with the flap's cut edge rounded by 2 mm instead of 8, GMRES + AMG, on the
-  100k-tet template: ``ramped`` (the load ramped on that mesh) and ``sequenced-no-contrast``
-  (mesh sequencing from the 25k-tet template, ``--coarse-mesh``, with the fine stage's
-  Newton directly on the model: ``SolverOptions.contrast.start`` set to its upper bound,
-  above any model's contrast, so the contrast path is one step; when that stage fails, the
-  state it stalled at is reported instead of the product's fall-back ramp on the fine mesh).
+  swelling) with the flap's cut edge rounded by 2 mm instead of 8, GMRES + AMG, the load
+  ramped on the 100k-tet template (``ramped``).
 - ``taylor-hood`` (``--taylor-hood``): the six scenarios of ``study`` with ``--element
   taylor-hood`` on the same 21k-tet mesh (``--th-scenarios`` picks some).
 - ``long`` (``--long``): Taylor-Hood at 175k tets (GMRES) and the default scenario on the
-  1.40M-tet mesh, mesh-sequenced from its nested 181k-tet Netgen mesh. Hours; not measured
-  by default.
+  1.40M-tet mesh, the load ramped there. Hours; not measured by default.
 
 Every row is parsed from the run's ``summary.json`` (a failed Newton solve from a given
 state: its iterations and residual from the summary's message); "run s" and the peak memory
@@ -41,13 +36,11 @@ import sys
 import time
 from pathlib import Path
 
-from brainbulge.solver import SolverOptions
-from brainbulge.solver.options import ContrastOptions
 from brainbulge.studies.craniectomy import SCENARIOS
 from brainbulge.studies.suites import PAPER_TETS
 
 #: the demo's and the planner's mesh sizes asked of Netgen [tets]
-DEMO_TETS, PLAN_TETS, COARSE_TETS = 30_000, 100_000, 25_000
+DEMO_TETS, PLAN_TETS = 30_000, 100_000
 #: the edge radius of the ``edge-radius`` rows [mm]
 SMALL_EDGE_MM = 2.0
 #: GNU time, for the peak memory
@@ -65,13 +58,12 @@ SCENARIO_NAMES = tuple(f"{flap}-flap_{swell}-swelling" for flap, swell in SCENAR
 class Run3D:
     """One process: ``argv`` of ``brainbulge`` (``{mesh:N}``: the cached N-tet mesh,
     ``{out}``: the run's folder); ``summaries``: the glob of its summary files under
-    ``{out}``; ``no_contrast``: run through :func:`no_contrast_main`."""
+    ``{out}``."""
 
     case: str
     variant: str
     argv: tuple[str, ...]
     summaries: str = "summary.json"
-    no_contrast: bool = False
 
     def meshes(self) -> list[int]:
         """The cached mesh sizes this run reads."""
@@ -110,17 +102,12 @@ RUNS: dict[str, list[Run3D]] = {
     "edge-radius": [
         Run3D("edge-2mm", "ramped", _brain(
             "--mesh", f"{{mesh:{PLAN_TETS}}}", "--skull-edge-radius", f"{SMALL_EDGE_MM:g}",
-            "--linear-solver", "krylov")),
-        Run3D("edge-2mm", "sequenced-no-contrast", _brain(
-            "--mesh", f"{{mesh:{PLAN_TETS}}}", "--coarse-mesh", f"{{mesh:{COARSE_TETS}}}",
-            "--skull-edge-radius", f"{SMALL_EDGE_MM:g}", "--linear-solver", "krylov"),
-            no_contrast=True)],
+            "--linear-solver", "krylov"))],
     "taylor-hood": [],  # per scenario: runs_for
     "long": [
         Run3D("taylor-hood-175k", "left-flap_both-swelling", _brain(
             "--tets", "175000", "--element", "taylor-hood", "--linear-solver", "krylov")),
-        Run3D("default-1.40M", "sequenced", _brain(
-            "--tets", str(PAPER_TETS), "--coarse-tets", str(PAPER_TETS // 8)))],
+        Run3D("default-1.40M", "ramped", _brain("--tets", str(PAPER_TETS)))],
 }
 
 
@@ -144,9 +131,7 @@ def command(run: Run3D, out: Path, cache: Path) -> list[str]:
     """The run's full command line, its meshes built."""
     meshes = {f"{{mesh:{n}}}": str(mesh_file(cache, n)) for n in run.meshes()}
     argv = [meshes.get(a, a).replace("{out}", str(out)) for a in run.argv]
-    head = ([sys.executable, __file__, "--no-contrast"] if run.no_contrast
-            else [sys.executable, "-m", "brainbulge"])
-    return [*head, *argv, "--overwrite"]
+    return [sys.executable, "-m", "brainbulge", *argv, "--overwrite"]
 
 
 def row_from_summary(s: dict, case: str, variant: str) -> dict:
@@ -158,15 +143,13 @@ def row_from_summary(s: dict, case: str, variant: str) -> dict:
     if not s.get("converged", True) and not s.get("load_steps") and stalled:
         newton, residual = int(stalled[2]), float(stalled[1])
     krylov = inputs.get("linear_solver") == "krylov" or bool(s.get("linear_iterations"))
-    seq = s.get("mesh_sequencing") or {}
     return {"case": case, "variant": variant, "converged": bool(s.get("converged", True)),
             "load": s.get("load_reached", 1.0), "newton": newton,
             "gmres": s.get("linear_iterations") if krylov else None,
             "residual": residual, "solve_s": s.get("wall_time_s"),
             "tets": s.get("elements"), "bulge_ml": s.get("bulge_volume_ml"),
             "monro_mm": s.get("midline_shift_mm"),
-            "strained_ml": s.get("strained_volume_ml"),
-            "coarse_newton": seq.get("coarse_newton_iterations")}
+            "strained_ml": s.get("strained_volume_ml")}
 
 
 def peak_mb(time_output: str) -> float | None:
@@ -239,65 +222,9 @@ def format_row(r: dict) -> str:
     if "error" in r:
         return f"| {r['case']} | {r['variant']} | error: {r['error']} | {r['run_s']:.0f} s |"
     newton = _num(r["newton"], "d") + ("+" if r["converged"] == "stopped" else "")
-    if r.get("coarse_newton") is not None:
-        newton += f" (+{r['coarse_newton']} coarse)"
     return (f"| {r['case']} | {r['variant']} | {_num(r['tets'], ',')} | {r['converged']} | "
             f"{r['load']:.3f} | {newton} | {_num(r['gmres'], ',')} | "
             f"{_num(r['residual'], '.1e')} | {_num(r['solve_s'], '.0f')} | "
             f"{r['run_s']:.0f} | {_num(r['peak_mb'], ',.0f')} | "
             f"{_num(r['bulge_ml'], '.1f')} | {_num(r['monro_mm'], '+.2f')} | "
             f"{_num(r['strained_ml'], '.1f')} |")
-
-
-def no_contrast_main(argv: list[str]) -> int:
-    """``brainbulge ARGV`` under :func:`without_contrast_path`."""
-    from brainbulge.cli import main
-
-    without_contrast_path()
-    return main(argv)
-
-
-def model_contrast_alone(options: SolverOptions) -> SolverOptions:
-    """``options`` whose contrast path starts at the largest start its range allows, above
-    any model's contrast: the path is the model's contrast alone."""
-    start = next(f for f in dataclasses.fields(ContrastOptions) if f.name == "start")
-    return dataclasses.replace(options, contrast=dataclasses.replace(
-        options.contrast, start=start.metadata["range"][1]))
-
-
-def without_contrast_path() -> None:
-    """Make mesh sequencing's fine stage Newton on the model itself (no contrast path);
-    when it fails, its stalled state and record become the solution (no fall-back ramp on
-    the fine mesh)."""
-    from brainbulge.solver.remesh import sequencing as seq
-    from brainbulge.solver.state import State
-
-    stalled: dict[int, tuple] = {}
-    equilibrate = seq.equilibrate_through_contrast
-
-    def fine_stage(form, options, start):
-        sol, first = equilibrate(form, model_contrast_alone(options), start)
-        if not sol.converged:
-            stalled[id(form)] = (sol, State(form).snapshot())
-        return sol, first
-
-    ramp = seq.ramp_from_rest
-
-    def no_fallback(form, options):
-        """The fine stage's fall-back ramp (the fallback combinator's second route), or
-        the stalled state and record of a fine stage that failed."""
-        if id(form) not in stalled:
-            return ramp(form, options)
-        sol, snap = stalled.pop(id(form))
-        State(form).restore(snap)
-        form.set_load(sol.load)
-        for pc in form.point_contacts:
-            pc.update(form.gfu.vec.FV().NumPy())
-        return sol
-
-    seq.equilibrate_through_contrast = fine_stage
-    seq.ramp_from_rest = no_fallback
-
-
-if __name__ == "__main__" and sys.argv[1:2] == ["--no-contrast"]:
-    sys.exit(no_contrast_main(sys.argv[2:]))

@@ -2,7 +2,6 @@
 the rows read from a run's summary (no solve here)."""
 
 import math
-from types import SimpleNamespace
 
 import pytest
 
@@ -29,31 +28,26 @@ def test_taylor_hood_runs_are_the_chosen_scenarios_on_the_demo_mesh():
 
 
 def test_command_resolves_the_cached_meshes_and_the_output_folder(tmp_path):
-    """With the meshes in the cache nothing is built: the placeholders become their paths,
-    and the sequenced run without contrast path goes through this module."""
-    for n in (h3.PLAN_TETS, h3.COARSE_TETS):
-        (tmp_path / f"mesh_{n}").mkdir()
-        (tmp_path / f"mesh_{n}" / "brain.npz").write_bytes(b"")
-    ramped, sequenced = h3.runs_for(["edge-radius"])
-    argv = h3.command(sequenced, tmp_path / "out", tmp_path)
-    assert argv[1:3] == [h3.__file__, "--no-contrast"]
+    """With the meshes in the cache nothing is built: the placeholders become their paths."""
+    (tmp_path / f"mesh_{h3.PLAN_TETS}").mkdir()
+    (tmp_path / f"mesh_{h3.PLAN_TETS}" / "brain.npz").write_bytes(b"")
+    (ramped,) = h3.runs_for(["edge-radius"])
+    argv = h3.command(ramped, tmp_path / "out", tmp_path)
+    assert argv[1:3] == ["-m", "brainbulge"]
     assert argv[argv.index("--mesh") + 1] == str(tmp_path / "mesh_100000" / "brain.npz")
-    assert argv[argv.index("--coarse-mesh") + 1] == str(tmp_path / "mesh_25000" / "brain.npz")
     assert argv[argv.index("--out") + 1] == str(tmp_path / "out")
-    assert "--coarse-mesh" not in h3.command(ramped, tmp_path / "o", tmp_path)
     assert "{" not in " ".join(h3.command(h3.runs_for(["flap"])[0], tmp_path / "o", tmp_path))
 
 
-def test_rows_report_gmres_only_for_krylov_runs_and_the_coarse_stage():
+def test_rows_report_gmres_only_for_krylov_runs():
     s = {"converged": False, "load_reached": 1.0, "newton_iterations": 9,
          "linear_iterations": 0, "final_residual": 1.55e-5, "wall_time_s": 99.0,
          "elements": 110937, "bulge_volume_ml": 57.7, "midline_shift_mm": -2.96,
-         "inputs": {"linear_solver": "pardiso"},
-         "mesh_sequencing": {"coarse_newton_iterations": 6}}
-    row = h3.row_from_summary(s, "edge-2mm", "sequenced")
-    assert row["gmres"] is None and row["coarse_newton"] == 6
+         "inputs": {"linear_solver": "pardiso"}}
+    row = h3.row_from_summary(s, "edge-2mm", "ramped")
+    assert row["gmres"] is None
     text = h3.format_row({**row, "run_s": 120.0, "peak_mb": None})
-    assert "| 110,937 | False | 1.000 | 9 (+6 coarse) | - | 1.6e-05 | 99 | 120 | - |" in text
+    assert "| 110,937 | False | 1.000 | 9 | - | 1.6e-05 | 99 | 120 | - |" in text
     row = h3.row_from_summary({**s, "linear_iterations": 786, "midline_shift_mm": math.nan,
                                "inputs": {"linear_solver": "krylov"}}, "c", "v")
     assert row["gmres"] == 786
@@ -67,36 +61,14 @@ def test_peak_memory_is_read_from_gnu_time():
     assert h3.peak_mb("Command exited with non-zero status 4\n") is None
 
 
-def test_without_contrast_path_the_fine_stage_is_one_step_on_the_model(monkeypatch):
-    from brainbulge.solver import SolverOptions, contrast
-    from brainbulge.solver.remesh import sequencing
-
-    for name in ("ramp_from_rest", "equilibrate_through_contrast"):
-        monkeypatch.setattr(sequencing, name, getattr(sequencing, name))  # restored afterwards
-    materials = {r: SimpleNamespace(shear_modulus=mu)
-                 for r, mu in (("white", 666.0), ("gray", 333.0), ("csf", 33.3))}
-    options = SolverOptions()
-    assert len(contrast.contrast_path(materials, options.contrast)) == 3
-    alone = h3.model_contrast_alone(options).contrast
-    assert contrast.contrast_path(materials, alone) == [pytest.approx(20.0)]
-    seen = []
-    monkeypatch.setattr(sequencing, "equilibrate_through_contrast",
-                        lambda form, opts, start: seen.append(opts) or (SimpleNamespace(
-                            converged=True), None))
-    h3.without_contrast_path()
-    sequencing.equilibrate_through_contrast("form", options, None)
-    assert seen[0].contrast == alone  # the fine stage gets the path of one step
-    assert sequencing.ramp_from_rest.__name__ == "no_fallback"  # the stalled state kept
-
-
-def test_a_fine_stage_that_stalled_reports_its_iterations_and_residual_from_its_message():
-    """A failed Newton solve from a carried-over state leaves no load-step record: its
-    iterations and last residual are those its message gives."""
+def test_a_start_that_stalled_reports_its_iterations_and_residual_from_its_message():
+    """A failed Newton solve from a given state leaves no load-step record: its iterations
+    and last residual are those its message gives."""
     s = {"converged": False, "load_reached": 1.0, "load_steps": 0, "newton_iterations": 0,
          "final_residual": None, "linear_iterations": 1292,
          "message": "Newton did not converge at load 1.0000 from the given state (|R| = "
-                    "3.09e-05 after 14 iterations) (contrast path stopped at 20 of 20)"}
-    row = h3.row_from_summary(s, "edge-2mm", "sequenced-no-contrast")
+                    "3.09e-05 after 14 iterations)"}
+    row = h3.row_from_summary(s, "edge-2mm", "ramped")
     assert (row["newton"], row["residual"], row["gmres"]) == (14, 3.09e-5, 1292)
     converged = {**s, "converged": True, "load_steps": 3, "newton_iterations": 13}
     assert h3.row_from_summary(converged, "c", "v")["newton"] == 13

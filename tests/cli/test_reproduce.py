@@ -1,6 +1,5 @@
 """``brainbulge reproduce``'s 3D part: the six scenarios on one shared mesh of the template
-scaled to the paper's volumes, white matter half of its 1108 ml brain (and one shared coarse
-mesh when mesh sequencing is asked for)."""
+scaled to the paper's volumes, white matter half of its 1108 ml brain."""
 
 from __future__ import annotations
 
@@ -30,32 +29,22 @@ def _spec(common: dict) -> dict:
     return spec
 
 
-@pytest.mark.parametrize(("tets", "coarse_tets"), [(30_000, None),
-                                                   (reproduce.PAPER_TETS, None),
-                                                   (reproduce.PAPER_TETS, 100_000)])
-def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tets,
-                                                                   coarse_tets) -> None:
-    """The geometry options (brain volume, refinement, coarse size) build the shared meshes
-    and are then dropped: the scenarios on the meshes pass validation. The paper's size is
-    refined and ramped without a coarse mesh unless one is asked for."""
+@pytest.mark.parametrize("tets", [30_000, reproduce.PAPER_TETS])
+def test_the_3d_scenarios_are_valid_once_their_meshes_are_attached(tmp_path, tets) -> None:
+    """The geometry options (brain volume, refinement) build the shared mesh and are then
+    dropped: the scenarios on the mesh pass validation. The paper's size is refined."""
     args = argparse.Namespace(tets=tets, fix="inferior+superior", mesh_size=0.05, scheduler=None)
     brain = reproduce.plan(args)["craniectomy"]
     assert len(brain) == 6
     assert all(sc["brain_volume_ml"] == 554.0 and sc["volume_of"] == "white" for sc in brain)
-    assert all(sc.get("coarse_tets") is None for sc in brain)
-    brain = [{**sc, "coarse_tets": coarse_tets} for sc in brain]
     common = brain[0]
     assert common.get("refine", 0) == (1 if tets >= reproduce.LARGE_TETS else 0)
     _fake_mesh(tmp_path / "mesh", _spec(common))
-    if coarse_tets:
-        _fake_mesh(tmp_path / "coarse-mesh",
-                   _spec({**common, "tets": common["coarse_tets"], "refine": 0}))
     attached = attach_study_meshes(tmp_path, brain)
     for sc in attached:
         case = case_from_dict({k: v for k, v in sc.items() if k != "name"})
         assert case.mesh == str(tmp_path / "mesh" / "brain.npz")
         assert case.brain_volume_ml is None and case.fix == "inferior+superior"
-        assert (case.coarse_mesh is not None) == bool(coarse_tets)
 
 
 @pytest.mark.slow

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import types
-
 import numpy as np
 import pytest
 
@@ -14,7 +12,6 @@ from brainbulge.geometry.brain.export import stored_tets
 from brainbulge.model.brain import (
     LARGE_TETS,
     CraniectomyCase,
-    coarse_brain_mesh_for,
     size_defaults,
 )
 from brainbulge.studies.craniectomy import with_size_defaults
@@ -22,28 +19,24 @@ from brainbulge.studies.craniectomy import with_size_defaults
 
 @pytest.mark.parametrize("tets", [30_000, 100_000, LARGE_TETS - 1])
 def test_small_meshes_keep_one_netgen_mesh_and_pardiso(tets) -> None:
-    assert size_defaults(tets) == (0, None, "pardiso")
+    assert size_defaults(tets) == (0, "pardiso")
 
 
 @pytest.mark.parametrize("tets", [LARGE_TETS, 1_400_000, 3_000_000])
 def test_large_meshes_refine_once_and_ramp_with_krylov(tets) -> None:
-    assert size_defaults(tets) == (1, None, "krylov")
+    assert size_defaults(tets) == (1, "krylov")
 
 
 def test_explicit_options_win() -> None:
-    assert size_defaults(1_400_000, linear_solver="pardiso") == (1, None, "pardiso")
-    assert size_defaults(1_400_000, refine=2) == (2, None, "krylov")
-    assert size_defaults(1_400_000, coarse_tets=175_000) == (1, 175_000, "krylov")  # nested
-    assert size_defaults(1_400_000, refine=0) == (0, None, "krylov")  # nothing to nest in
-    assert size_defaults(1_400_000, coarse_tets=100_000) == (1, 100_000, "krylov")
-    assert size_defaults(1_400_000, coarse_tets=0) == (1, None, "krylov")  # 0: no sequencing
-    assert size_defaults(100_000, refine=1, linear_solver="krylov") == (1, None, "krylov")
-    assert size_defaults(100_000, coarse_tets=30_000) == (0, 30_000, "pardiso")
+    assert size_defaults(1_400_000, linear_solver="pardiso") == (1, "pardiso")
+    assert size_defaults(1_400_000, refine=2) == (2, "krylov")
+    assert size_defaults(1_400_000, refine=0) == (0, "krylov")
+    assert size_defaults(100_000, refine=1, linear_solver="krylov") == (1, "krylov")
 
 
 def test_a_given_mesh_is_not_refined_unasked() -> None:
-    assert size_defaults(1_400_000, mesh_given=True) == (0, None, "krylov")
-    assert size_defaults(100_000, mesh_given=True) == (0, None, "pardiso")
+    assert size_defaults(1_400_000, mesh_given=True) == (0, "krylov")
+    assert size_defaults(100_000, mesh_given=True) == (0, "pardiso")
 
 
 @pytest.mark.parametrize("tets, solver", [(LARGE_TETS - 1, "pardiso"), (LARGE_TETS, "krylov")])
@@ -73,44 +66,29 @@ def test_an_unreadable_mesh_file_is_a_clear_error(tmp_path) -> None:
         stored_tets(path)
 
 
-def test_the_case_resolves_its_defaults_and_knows_its_nested_coarse_mesh() -> None:
+def test_the_case_resolves_its_defaults() -> None:
     large = CraniectomyCase(tets=1_400_000)
-    assert (large.refine, large.coarse_tets, large.linear_solver) == (1, None, "krylov")
-    assert not large.nested_coarse
-    assert CraniectomyCase(tets=1_400_000, coarse_tets=175_000).nested_coarse
+    assert (large.refine, large.linear_solver) == (1, "krylov")
     small = CraniectomyCase(tets=30_000)
-    assert (small.refine, small.coarse_tets, small.linear_solver) == (0, None, "pardiso")
-    assert not small.nested_coarse
-    other = CraniectomyCase(tets=1_400_000, coarse_tets=100_000, linear_solver="pardiso")
-    assert (other.coarse_tets, other.linear_solver, other.nested_coarse) == (
-        100_000, "pardiso", False)
-    assert CraniectomyCase(tets=1_400_000, coarse_tets=0).coarse_tets is None
-    with pytest.raises(InputError, match="coarse_tets"):
-        CraniectomyCase(tets=1_400_000, coarse_tets=1_400_000)
-
-
-def test_the_nested_coarse_mesh_is_the_fine_meshs_unrefined_one() -> None:
-    unrefined = object()
-    fine = types.SimpleNamespace(unrefined=unrefined)
-    nested = CraniectomyCase(tets=1_400_000, coarse_tets=175_000)
-    assert coarse_brain_mesh_for(nested, fine) is unrefined
-    assert coarse_brain_mesh_for(CraniectomyCase(tets=30_000), fine) is None
+    assert (small.refine, small.linear_solver) == (0, "pardiso")
+    other = CraniectomyCase(tets=1_400_000, linear_solver="pardiso")
+    assert other.linear_solver == "pardiso"
 
 
 def test_the_command_line_passes_only_what_the_user_gave() -> None:
     parse = build_parser().parse_args
     cfg = config_from_args(parse(["brain", "--tets", "1400000", "--out", "x"]))
-    assert not {"refine", "coarse_tets", "linear_solver"} & set(cfg)  # left to the case
+    assert not {"refine", "linear_solver"} & set(cfg)  # left to the case
     case = CraniectomyCase(**cfg)
-    assert (case.refine, case.coarse_tets, case.linear_solver) == (1, None, "krylov")
+    assert (case.refine, case.linear_solver) == (1, "krylov")
     cfg = config_from_args(parse(["brain", "--tets", "1400000", "--linear-solver", "pardiso",
                                   "--refine", "0", "--out", "x"]))
     case = CraniectomyCase(**cfg)
-    assert (case.refine, case.coarse_tets, case.linear_solver) == (0, None, "pardiso")
+    assert (case.refine, case.linear_solver) == (0, "pardiso")
 
 
 def test_a_study_takes_the_defaults_of_its_size() -> None:
     sc = with_size_defaults({"tets": 1_400_000, "flap": "left"})
-    assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (1, None, "krylov")
+    assert (sc["refine"], sc["linear_solver"]) == (1, "krylov")
     sc = with_size_defaults({"tets": 1_400_000, "linear_solver": "pardiso", "refine": 0})
-    assert (sc["refine"], sc["coarse_tets"], sc["linear_solver"]) == (0, None, "pardiso")
+    assert (sc["refine"], sc["linear_solver"]) == (0, "pardiso")

@@ -52,7 +52,7 @@ class _Count(NewtonObserver):
     def iteration(self, it: int, norm: float) -> None:
         self.norms.append(norm)
 
-    def step(self, s: float, eq, eta, curvature: bool) -> None:
+    def step(self, s: float, eq, eta) -> None:
         self.steps.append(s)
 
 

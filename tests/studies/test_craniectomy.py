@@ -288,59 +288,19 @@ def test_a_killed_scenario_resumes_from_its_restart_file(symmetric_brain, tmp_pa
     assert not (tmp_path / "restart.npz").exists()
 
 
-@pytest.mark.slow
-def test_mesh_sequencing_reaches_the_same_state(symmetric_brain, shifts, tmp_path) -> None:
-    """A coarse mesh of the same labels solved first: the fine mesh's Newton, started at
-    full load from its solution, converges in one step to the ramp's state up to the
-    non-uniqueness of frictionless contact on a curved skull: both are equilibria, the
-    sequenced one here with a few contact points lifted off by <= 0.25 mm instead of resting
-    at zero pressure, and 1.2 % less strain energy (docs/performance.md)."""
-    image = tissue_image_from_labels(*symmetric_labels(), "freesurfer")
-    coarse = build_brain_mesh(image, target_tets=2000, midsagittal=MidSagittalPlane())
-    assert len(coarse.tets) < 0.6 * len(symmetric_brain.tets)
-    s = run_brain({**SYMMETRIC, "swell": "left"}, tmp_path,
-                  brain_mesh=symmetric_brain, coarse_brain_mesh=coarse)
-    ramp = shifts["left"]
-    seq = s["mesh_sequencing"]
-    assert seq["coarse_converged"] and seq["fine_converged"]
-    assert seq["coarse_elements"] == len(coarse.tets)
-    assert s["converged"] and s["load_steps"] == 1
-    assert s["newton_iterations"] <= ramp["newton_iterations"]
-    for key in ("midline_shift_mm", "bulge_volume_ml", "max_displacement", "max_pressure_kpa"):
-        assert s[key] == pytest.approx(ramp[key], rel=0.03), key
-    assert s["max_penetration_mm"] < 1e-3
-    assert abs(s["integral_J_minus_Js"]) < 1e-6 * s["brain_volume_ml"] * 1000
-    assert ramp["mesh_sequencing"] is None
-
-
 @pytest.mark.parametrize(
     ("options", "message"),
     [
-        ({"tets": 30000, "coarse_tets": 40000}, "must be a whole number in"),
-        ({"coarse_tets": 5000, "element": "taylor-hood"}, "needs --element mini"),
-        ({"coarse_mesh": "missing/brain.npz"}, "does not exist"),
-        ({"coarse_tets": 5000, "coarse_mesh": "missing/brain.npz"}, "not both"),
         ({"refine": 4}, r"refine = 4 must be a whole number in \[0, 3\]"),
         ({"refine": 1.0}, r"refine = 1.0 must be a whole number in \[0, 3\]"),
     ],
 )
-def test_mesh_sequencing_inputs_are_checked(options, message) -> None:
+def test_refine_inputs_are_checked(options, message) -> None:
     from brainbulge.errors import InputError
     from brainbulge.model.brain import CraniectomyCase
 
     with pytest.raises(InputError, match=message):
         CraniectomyCase(**options)
-
-
-def test_a_coarse_mesh_of_another_brain_is_refused(symmetric_brain, tmp_path) -> None:
-    import dataclasses
-
-    from brainbulge.errors import InputError
-
-    bigger = dataclasses.replace(symmetric_brain, nodes_mm=1.2 * symmetric_brain.nodes_mm)
-    with pytest.raises(InputError, match="not of the same brain"):
-        run_brain({"flap": "frontal", "swell": "left", "steps": 2}, tmp_path,
-                  brain_mesh=symmetric_brain, coarse_brain_mesh=bigger)
 
 
 def test_refine_is_refused_next_to_a_given_mesh(tmp_path) -> None:

@@ -17,8 +17,8 @@ STUDIES = sorted(Path(brainbulge.studies.__file__).parent.glob("*.py"))
 #: describes, the results (a solution, its form, its failure and records) and the options
 ALLOWED = {
     "solve", "Strategy", "Route", "Rezoning",
-    "Solution", "Failure", "StepRecord", "Sequenced", "MixedForm",
-    "SolverOptions", "ContrastOptions", "SequencingOptions", "RezoningOptions",
+    "Solution", "Failure", "StepRecord", "MixedForm",
+    "SolverOptions", "RezoningOptions",
     "WarmStartOptions", "KrylovOptions", "HotspotOptions",
 }
 
@@ -61,7 +61,7 @@ def test_the_allowed_names_are_the_solver_packages_own() -> None:
 def test_the_finder_sees_a_forbidden_import(tmp_path) -> None:
     bad = tmp_path / "bad.py"
     bad.write_text("def f():\n    from brainbulge.solver.ramp import NewtonSolver\n"
-                   "import brainbulge.solver.remesh.sequencing\n")
+                   "import brainbulge.solver.remesh.rezoning\n")
     assert [(m, n) for _, m, n in _solver_imports(bad)] == [
         ("brainbulge.solver.ramp", "NewtonSolver"),
-        ("brainbulge.solver.remesh.sequencing", "*")]
+        ("brainbulge.solver.remesh.rezoning", "*")]

@@ -167,12 +167,8 @@ def brain_case(config: dict[str, Any]) -> Any:
     if case.mesh is None:
         labelled = None if case.labels is None else labelled_ml(case.labels, case.label_map)
         mesh_tets(case.tets, case.refine, template=case.labels is None, labelled_ml=labelled)
-        if case.coarse_tets is not None:
-            mesh_tets(case.coarse_tets, 0, template=case.labels is None, labelled_ml=labelled)
     if case.mesh is not None:
         brain_npz(case.mesh)
-    if case.coarse_mesh is not None:
-        brain_npz(case.coarse_mesh, "--coarse-mesh")
     return case
 
 

@@ -9,7 +9,7 @@
    at the paper's resolution by default (the paper: 1,275,808 tets; here Netgen meshes at
    ``--tets / 8`` and the mesh is refined once, ~1.4M tets). The six scenarios share one
    mesh (``craniectomy/mesh/``), the compiled energy (cached on disk) and, per worker, the
-   loaded meshes; each ramps its load on that mesh (no mesh sequencing); from 400k tets on
+   loaded meshes; each ramps its load on that mesh; from 400k tets on
    they run one at a time (one worker: ~10 GB each at 1.4M tets) with the Krylov solver.
 
 Rerun the same command to resume: finished scenarios are kept, a scenario stopped mid-way

@@ -1,7 +1,7 @@
 """An NGSolve mesh and its vertex DOFs as NumPy arrays, without a Python loop per entity.
 
 ``[v.point for v in mesh.vertices]``, ``mesh.Elements(VOL)`` and ``GetDofNrs`` per vertex
-cost seconds per million entities: at 1.4M tets the carry-over of mesh sequencing spent
+cost seconds per million entities: at 1.4M tets a carry-over of a coarse state spent
 ~17 s in such loops and the vertex fields ~8 s. Netgen's own arrays
 (``Coordinates()``, ``Elements3D().NumPy()``) give the same numbers at once.
 """

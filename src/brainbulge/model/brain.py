@@ -16,7 +16,6 @@ swelling``, in the left hemisphere, the right, or both.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -61,7 +60,7 @@ def brain_mesh_for(case: CraniectomyCase) -> BrainMesh:
         image = load_tissue_image(case.labels, case.label_map) if case.labels else None
         bm = build_brain_mesh(image, target_tets=case.tets,
                               brain_volume_ml=case.brain_volume_ml, volume_of=case.volume_of,
-                              refinements=case.refine, keep_unrefined=case.nested_coarse)
+                              refinements=case.refine)
     open_case_flap(bm, case)
     return bm
 
@@ -82,21 +81,6 @@ def open_case_flap(bm: BrainMesh, case: CraniectomyCase) -> None:
     if case.flap != "none" and case.flap not in bm.flaps:
         raise InputError(f"flap {case.flap!r} is not defined on this mesh (it has "
                          f"{', '.join(sorted(bm.flaps))}); rebuild it with the flap's centre")
-
-
-def coarse_brain_mesh_for(case: CraniectomyCase, fine: BrainMesh | None = None
-                          ) -> BrainMesh | None:
-    """The coarse mesh of mesh sequencing (``coarse_tets`` or ``coarse_mesh``), or None;
-    the ``unrefined`` mesh of ``fine`` when the two are nested (``case.nested_coarse``)."""
-    if case.coarse_tets is None and case.coarse_mesh is None:
-        return None
-    if case.nested_coarse and fine is not None and fine.unrefined is not None:
-        return fine.unrefined
-    if case.coarse_mesh is not None:
-        coarse = replace(case, mesh=case.coarse_mesh, coarse_mesh=None)
-    else:
-        coarse = replace(case, tets=case.coarse_tets, coarse_tets=None, refine=0)
-    return brain_mesh_for(coarse)
 
 
 def tissue_materials(material: str) -> dict[str, MooneyRivlin]:

@@ -59,28 +59,23 @@ TETS_FLOOR_TEXT = (f"of the ICBM152 template at least {TEMPLATE_TETS_MIN} x 8^K 
                    f"K, of a --labels image at least {LABELS_TETS_PER_ML[0]:.1f} per ml of tissue")
 
 
-def size_defaults(tets: int, refine: int | None = None, coarse_tets: int | None = None,
-                  linear_solver: str | None = None,
-                  mesh_given: bool = False) -> tuple[int, int | None, str]:
-    """``(refine, coarse_tets, linear_solver)`` for a mesh of about ``tets`` tets (a mesh
+def size_defaults(tets: int, refine: int | None = None, linear_solver: str | None = None,
+                  mesh_given: bool = False) -> tuple[int, str]:
+    """``(refine, linear_solver)`` for a mesh of about ``tets`` tets (a mesh
     read from a file: its own number of tets); each argument given (not None) is kept as it
     is.
 
     From :data:`LARGE_TETS` up: Netgen at ``tets / 8``, refined once (``refine = 1``), the
     load ramped on the fine mesh and GMRES with AMG blocks (``krylov``); below it: one
-    Netgen mesh, PARDISO. Mesh sequencing (``coarse_tets``) only when asked for: on the
-    1.40M-tet template the fine stage did not converge from a coarse state (from a separate
-    100k-tet mesh, nor from the nested 175k one) and then ramped anyway, so sequencing cost
-    38.7 minutes and 17.4 GB against the ramp's 17 minutes and 12.5 GB (docs/performance.md).
-    ``coarse_tets = 0`` is the same as None. A mesh read from a file (``mesh_given``) is not
-    refined unless asked.
+    Netgen mesh, PARDISO. A mesh read from a file (``mesh_given``) is not refined unless
+    asked.
     """
     large = tets >= LARGE_TETS
     if refine is None:
         refine = 1 if large and not mesh_given else 0
     if linear_solver is None:  # PARDISO on a 1.40M-tet brain: ~5.9M unknowns, out of memory
         linear_solver = "krylov" if large else "pardiso"
-    return refine, coarse_tets or None, linear_solver
+    return refine, linear_solver
 
 
 #: how the help states the defaults that depend on other options
@@ -88,7 +83,6 @@ DEFAULT_TEXT = {
     "linear_solver": f"default: from the size, krylov from {LARGE_TETS:,} tets",
     "refine": f"default: 1 from {LARGE_TETS:,} tets, else 0",
     "flap_diameter_mm": f"default {UNILATERAL_DIAMETER_MM:g}",
-    "coarse_tets": "default: none, the load is ramped on the mesh itself",
     "labels": "default: the ICBM152 template",
     "fibres": "default: radial from the brain's centre",
 }
@@ -164,17 +158,9 @@ class CraniectomyCase:
         SUPERIOR_ELEVATION_DEG, "the superior band covers the midline above this elevation "
         "seen from the brain centre", unit=" deg", range=SUPERIOR_ELEVATION_RANGE_DEG,
         label="superior band elevation", flag="--superior-elevation")
-    coarse_tets: int | None = option(
-        None, "mesh sequencing: solve first on a mesh of about this many tets of the same "
-        "geometry, then finish on the fine mesh from its solution (MINI)",
-        range=(TETS_RANGE[0], "tets"), solver=True)
-    coarse_mesh: str | None = option(
-        None, "mesh sequencing with this brain.npz as the coarse mesh (with --mesh)",
-        solver=True)
     refine: int | None = option(
         None, "mesh at tets / 8^K and refine it uniformly K times (new surface nodes on the "
-        "skull's inner surface); with --coarse-tets tets / 8^K the sequencing meshes are "
-        "nested", range=(0, 3), solver=True)
+        "skull's inner surface)", range=(0, 3), solver=True)
     name: str = option("", "the scenario's name (default FLAP-flap_SWELL-swelling)",
                        internal=True)
     extra: dict = option(None, "what a planner records about the case", internal=True,
@@ -191,7 +177,6 @@ class CraniectomyCase:
             )
         if self.flap_centre_mm is not None:
             self.flap_centre_mm = tuple(self.flap_centre_mm)  # type: ignore[assignment]
-        self.coarse_tets = self.coarse_tets or None  # 0: none
         check_ranges(self)
         size = self.tets
         if self.mesh is not None:
@@ -201,8 +186,8 @@ class CraniectomyCase:
             # read, with the reader's reason
             with contextlib.suppress(InputError):
                 size = stored_tets(self.mesh)
-        self.refine, self.coarse_tets, self.linear_solver = size_defaults(
-            size, self.refine, self.coarse_tets, self.linear_solver, self.mesh is not None)
+        self.refine, self.linear_solver = size_defaults(
+            size, self.refine, self.linear_solver, self.mesh is not None)
         if self.linear_solver not in LINEAR_SOLVERS:
             raise InputError(f"linear solver {self.linear_solver!r}: choose pardiso or krylov")
         if self.element not in ELEMENTS:
@@ -236,19 +221,11 @@ class CraniectomyCase:
         if self.refine and self.mesh is not None:
             raise InputError("--refine applies to a mesh built here, not to --mesh: build a "
                              "refined one with `brainbulge mesh --refine` and pass that")
-        self._check_sequencing()
         if self.fibres is not None and not Path(self.fibres).is_file():
             raise InputError(f"fibre image {self.fibres} does not exist or is not a regular "
                              "file; give a NIfTI file (.nii/.nii.gz) of shape (nx, ny, nz, 3)")
         if not self.name:
             self.name = f"{self.flap}-flap_{self.swell}-swelling"
-
-    @property
-    def nested_coarse(self) -> bool:
-        """The coarse mesh of sequencing is the Netgen mesh that the fine one refines
-        (``coarse_tets = tets // 8**refine``): built once, no second Netgen run."""
-        return (self.mesh is None and bool(self.refine) and self.coarse_tets is not None
-                and self.coarse_tets == self.tets // 8**self.refine)
 
     @property
     def flap_diameter(self) -> float:
@@ -261,25 +238,6 @@ class CraniectomyCase:
 
         band = SuperiorBand(self.superior_width_mm, self.superior_elevation_deg)
         return band if self.fix == "inferior+superior" else None
-
-    def _check_sequencing(self) -> None:
-        if self.coarse_tets is None and self.coarse_mesh is None:
-            return
-        if self.element != "mini":
-            raise InputError("mesh sequencing (--coarse-tets, --coarse-mesh) needs --element "
-                             "mini")
-        if self.coarse_tets is not None and self.coarse_mesh is not None:
-            raise InputError("give --coarse-tets or --coarse-mesh, not both")
-        if self.coarse_mesh is not None and not Path(self.coarse_mesh).exists():
-            raise InputError(f"coarse brain mesh {self.coarse_mesh} does not exist; build one "
-                             "with `brainbulge mesh --tets N --out DIR` and pass DIR/brain.npz")
-        if self.coarse_tets is not None:
-            if self.mesh is not None:
-                raise InputError("--coarse-tets builds the coarse mesh from the geometry "
-                                 "inputs, which --mesh fixes: pass --coarse-mesh instead")
-            if self.coarse_tets == self.tets:
-                raise InputError(f"coarse_tets = {self.coarse_tets!r} must be below tets = "
-                                 f"{self.tets}: the coarse mesh is the coarser one")
 
 
 #: the fields of :class:`CraniectomyCase` that say how it is discretised and solved (the

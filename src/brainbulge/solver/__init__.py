@@ -1,8 +1,8 @@
 """The solve: :func:`solve` runs the route a :class:`Strategy` chooses for a problem
-(:mod:`.strategy`: the load ramp, 2D rezoning, mesh sequencing, a warm start); each route is
-walked by the one continuation driver (:mod:`.driver`) over small path classes (the load ramp
-:mod:`.ramp` with its restart file :mod:`.restart`, the contrast path :mod:`.contrast`, the
-rezoning ramp and mesh sequencing in :mod:`.remesh`), each step Newton with a line search
+(:mod:`.strategy`: the load ramp, 2D rezoning, a warm start); each route is walked by the
+one continuation driver (:mod:`.driver`) over small path classes (the load ramp :mod:`.ramp`
+with its restart file :mod:`.restart`, the rezoning ramp in :mod:`.remesh`), each step Newton
+with a line search
 (:mod:`.newton`) on the discrete equations (:mod:`.equations`) of the mixed u-p form
 (:mod:`.mixed`), with the skull contact's active set (:mod:`.contact`), the linear solvers
 (:mod:`.linear`) and fast paths (:mod:`.fast`). Every tunable is a field of the options tree
@@ -12,7 +12,7 @@ rezoning ramp and mesh sequencing in :mod:`.remesh`), each step Newton with a li
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Failure, Solution, SolverOptions, StepRecord
 from brainbulge.solver.ramp import NewtonSolver
-from brainbulge.solver.strategy import Rezoning, Route, Sequenced, Strategy, solve
+from brainbulge.solver.strategy import Rezoning, Route, Strategy, solve
 
-__all__ = ["Failure", "MixedForm", "NewtonSolver", "Rezoning", "Route", "Sequenced", "Solution",
+__all__ = ["Failure", "MixedForm", "NewtonSolver", "Rezoning", "Route", "Solution",
            "SolverOptions", "StepRecord", "Strategy", "solve"]

@@ -1,9 +1,9 @@
 """One continuation driver: a parameter walked from a start to a target with one step control.
 
 Every way of reaching a hard equilibrium by a path walks one parameter ``s`` from a start to
-a target: the load factor ``t`` of the swelling (:class:`~brainbulge.solver.ramp.LoadRamp`),
-the position on the stiffness-contrast path (:class:`~brainbulge.solver.contrast.
-ContrastPath`). :func:`walk` owns the step control, the same for all (:class:`StepControl`):
+a target: the load factor ``t`` of the swelling (:class:`~brainbulge.solver.ramp.LoadRamp`,
+also on rezoned meshes: :class:`~brainbulge.solver.remesh.rezoning.RezoningRamp`). :func:`walk`
+owns the step control, the same for all (:class:`StepControl`):
 
 - a step ``ds`` (at most what is left to the target) is tried from the last accepted state
   (the path may predict the new state from it);

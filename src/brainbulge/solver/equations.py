@@ -125,9 +125,8 @@ class MixedEquations:
         val = float(np.hypot(ru, rp))
         return val if np.isfinite(val) else np.inf
 
-    def tangent(self, x: ngs.BaseVector, curvature: bool = True) -> sp.csr_matrix:
-        """``K = dR/dx`` (condensed) on the free DOFs, with the contacts' curvature terms
-        (left out with ``curvature`` false: a modified Newton method)."""
+    def tangent(self, x: ngs.BaseVector) -> sp.csr_matrix:
+        """``K = dR/dx`` (condensed) on the free DOFs, with the contacts' curvature terms."""
         t0 = time.perf_counter()
         if self.closed is not None:  # assembled on the free DOFs' pattern
             K = self.closed.assemble(x.FV().NumPy())
@@ -140,7 +139,7 @@ class MixedEquations:
             K = sp.csr_matrix((np.asarray(data), indices, indptr),
                               shape=(mat.height, mat.width))
             K = self._free_part(K)
-        for C in self.contact.curvatures(x.FV().NumPy(), curvature):
+        for C in self.contact.curvatures(x.FV().NumPy()):
             K = self._add_curvature(K, self._restrict_free(C))
         self.t_assembly += time.perf_counter() - t0
         return K
@@ -156,7 +155,7 @@ class MixedEquations:
         Static condensation (MINI's bubbles) extends the right-hand side before and the
         solution after the solve; the contact rows come from :meth:`ActiveSet.linearize`.
         ``guess``: the linear system's solution of a retry at the same state (another active
-        set, or a tighter tolerance), an initial guess for an iterative solver solving to the
+        set), an initial guess for an iterative solver solving to the
         relative tolerance ``rtol``.
         """
         if K is None:  # a retry at the same state (new active set) reuses the tangent

@@ -11,9 +11,8 @@ halved from 1 until the scaled residual :meth:`MixedEquations.scaled_norm
 <brainbulge.solver.equations.MixedEquations.scaled_norm>` falls by the Armijo factor
 ``1 - 1e-4 s``. With the Krylov solver the linear solve is inexact, to the relative tolerance
 of :func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with its
-:class:`Reason`, after ``max_iterations``, at a non-finite residual, when the line search
-finds no step, after ``stagnation`` short steps in a row, or when it falls short of
-``required_progress`` (:class:`SolverOptions`).
+:class:`Reason`, after ``max_iterations``, at a non-finite residual, when the linear solve
+fails or when the line search finds no step (:class:`SolverOptions`).
 
 :func:`newton` is a function of the equations (:class:`MixedEquations`) and their state: it
 keeps nothing between solves and returns a :class:`NewtonResult`. What is shown of a solve
@@ -53,19 +52,17 @@ class Reason(enum.Enum):
     CONVERGED = "converged"
     NOT_FINITE = "not finite"
     MAX_ITERATIONS = "max iterations"
-    TOO_SLOW = "too slow"
     LINEAR_FAILED = "linear solve failed"
     NO_STEP = "no step"
-    STAGNATED = "stagnated"
 
 
 @dataclass(frozen=True)
 class NewtonResult:
     """One Newton solve: whether it converged, its iterations, the scaled residual [-] of
     each iterate (the first is the start's), the Krylov iterations (0 with a direct solver),
-    why it ended (``reason`` and ``detail``, one phrase for the user), the directions solved
-    again tighter after a failed line search, and, on failure, the deformed position
-    [length] of the vertex with the largest unbalanced force (None: not finite)."""
+    why it ended (``reason`` and ``detail``, one phrase for the user) and, on failure, the
+    deformed position [length] of the vertex with the largest unbalanced force (None: not
+    finite)."""
 
     converged: bool
     iterations: int
@@ -73,7 +70,6 @@ class NewtonResult:
     linear_iterations: int
     reason: Reason
     detail: str = ""
-    tightened: int = 0
     site: np.ndarray | None = None
 
     @property
@@ -88,9 +84,8 @@ class NewtonObserver:
     def iteration(self, it: int, norm: float) -> None:
         """Iterate ``it`` has scaled residual ``norm``."""
 
-    def step(self, s: float, eq: MixedEquations, eta: float | None, curvature: bool) -> None:
-        """A line-search step ``s`` was accepted (``eta``: the Krylov tolerance, or None;
-        ``curvature``: the contacts' curvature term was in the tangent)."""
+    def step(self, s: float, eq: MixedEquations, eta: float | None) -> None:
+        """A line-search step ``s`` was accepted (``eta``: the Krylov tolerance, or None)."""
 
 
 class NewtonLog(NewtonObserver):
@@ -106,37 +101,32 @@ class NewtonLog(NewtonObserver):
         log.log(logging.INFO if elapsed > self.slow_s else logging.DEBUG,
                 "    newton %d: |R| = %.3e (%.0f s)", it, norm, elapsed)
 
-    def step(self, s: float, eq: MixedEquations, eta: float | None, curvature: bool) -> None:
+    def step(self, s: float, eq: MixedEquations, eta: float | None) -> None:
         pcs = eq.contact.contacts
-        log.debug("    step %.3g, %d active contact points (%d pulling)%s%s", s,
+        log.debug("    step %.3g, %d active contact points (%d pulling)%s", s,
                   sum(int(a.sum()) for a in eq.contact.last_active),
                   sum(int((pc.lam < 0).sum()) for pc in pcs),
-                  "" if curvature or not pcs else ", no curvature",
                   "" if eta is None else f", Krylov rtol {eta:.1e}")
 
 
 @dataclass
 class _Inexact:
-    """One solve's inexact-Newton controls: the Krylov tolerance ``eta``, its cap, the last
-    linear solution (the guess of a retry at the same state) and the tightened directions.
-    ``eta`` is None with a direct solver."""
+    """One solve's inexact-Newton controls: the Krylov tolerance ``eta`` (None with a
+    direct solver), the last linear solution (the guess of a retry at the same state) and
+    each iterate's scaled residual."""
 
     eta: float | None
-    cap: float
     guess: np.ndarray | None = None
-    tightened: int = 0
     residuals: list[float] = field(default_factory=list)
 
 
 def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None = None,
-           curvature_below: float = np.inf, limit_step: StepLimit | None = None,
+           limit_step: StepLimit | None = None,
            observers: Sequence[NewtonObserver] | None = None,
            relax: Callable[[ngs.BaseVector, float], float] | None = None) -> NewtonResult:
     """Solve ``R(x) = 0`` at the form's load from its current state (changed in place, with
     the contact pressures) to ``tolerance`` (default: ``options.newton.tolerance``).
 
-    ``curvature_below``: the contacts' curvature term enters the tangent only at iterates
-    whose scaled residual is at most this (a modified Newton method far from the solution).
     ``limit_step``: a factor in (0, 1] applied to each Newton update before the line search.
     ``observers``: default a :class:`NewtonLog`. ``relax(x, |R|) -> |R|``: a local solve
     after each accepted step (:mod:`brainbulge.solver.fast.hotspot`)."""
@@ -146,16 +136,14 @@ def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None =
     # one OpenBLAS thread beside PARDISO (brainbulge.solver.threads); the Krylov path's
     # long vectors keep theirs (111k-tet brain: 10 % slower on one)
     with nullcontext() if eq.inexact else serial_openblas():
-        eta_max = options.linear.eta_max
-        run = _Inexact(eta_max if eq.inexact else None, eta_max)
-        ok, its, reason, detail = _iterate(eq, options, tol, curvature_below, limit_step,
-                                           watch, relax, run)
+        run = _Inexact(options.linear.eta_max if eq.inexact else None)
+        ok, its, reason, detail = _iterate(eq, options, tol, limit_step, watch, relax, run)
     return NewtonResult(ok, its, tuple(run.residuals),
                         int(sum(eq.linear.stats.iterations) - linear_before), reason, detail,
-                        run.tightened, None if ok else eq.residual_site(eq.state.x))
+                        None if ok else eq.residual_site(eq.state.x))
 
 
-def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below: float,
+def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
              limit_step: StepLimit | None, watch: Sequence[NewtonObserver],
              relax: Callable[[ngs.BaseVector, float], float] | None, run: _Inexact
              ) -> tuple[bool, int, Reason, str]:
@@ -164,7 +152,6 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
     eq.contact.start_solve()
     eq.linear.new_load_step()
     norm = eq.scaled_norm(eq.residual(state.x))
-    short_steps, norm_before_short = 0, norm  # the run of short line-search steps
     for it in range(nw.max_iterations + 1):
         run.residuals.append(norm)
         for o in watch:
@@ -175,68 +162,48 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float, curvature_below
             return False, it, Reason.NOT_FINITE, "the residual is not finite"
         if it == nw.max_iterations:
             return False, it, Reason.MAX_ITERATIONS, f"max_iterations = {it} reached"
-        first, progress = run.residuals[0], opt.required_progress
-        if progress is not None and it == progress[0] and norm > progress[1] * first:
-            log.debug("    too slow: |R| %.3e after %d iterations from %.3e", norm, it, first)
-            return False, it, Reason.TOO_SLOW, (f"too slow: |R| above {progress[1]:g} times "
-                                                f"its first ({first:.2e})")
-        curvature = norm <= curvature_below
         try:
-            s, trial = _step(eq, opt, state.snapshot(), norm, tol, curvature, limit_step, run)
+            s, trial = _step(eq, opt, state.snapshot(), norm, tol, limit_step, run)
         except ConvergenceError as exc:
             return False, it, Reason.LINEAR_FAILED, f"the linear solve failed ({exc})"
         if s is None:
             return False, it, Reason.NO_STEP, "the line search found no step lowering |R|"
         for o in watch:
-            o.step(s, eq, run.eta, curvature)
+            o.step(s, eq, run.eta)
         # (a full step that does not halve the residual is not the Krylov tolerance's doing
         # here: from one 1.54M-tet state, GMRES at 1e-7 instead of 1e-4 gave the same
         # Newton residuals to four digits; tightening after such steps only doubled the
         # GMRES iterations)
         if run.eta is not None:
-            run.eta = min(run.cap, forcing_term(run.eta, trial / norm, trial, tol,
-                                                opt.linear.eta_max, opt.linear.eta_min))
-        if s > nw.short_step:
-            short_steps, norm_before_short = 0, trial
-        else:
-            short_steps += 1
+            run.eta = min(opt.linear.eta_max, forcing_term(
+                run.eta, trial / norm, trial, tol, opt.linear.eta_max, opt.linear.eta_min))
         norm = trial
         if relax is not None and norm > tol:
             norm = relax(state.x, norm)
         eq.contact.let_pulling_go()
-        if (0 < nw.stagnation <= short_steps and norm > tol
-                and norm > nw.stagnation_progress * norm_before_short):
-            log.debug("    stagnated: %d short steps from |R| = %.3e", short_steps,
-                      norm_before_short)
-            return False, it + 1, Reason.STAGNATED, (
-                f"stagnated: {short_steps} line-search steps of at most "
-                f"{_fraction(nw.short_step)} in a row")
     raise AssertionError("unreachable: the loop returns at its last iteration")
 
 
 def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol: float,
-          curvature: bool, limit_step: StepLimit | None, run: _Inexact
+          limit_step: StepLimit | None, run: _Inexact
           ) -> tuple[float | None, float]:
     """One Newton iteration from ``x0`` (the state): the direction and its line search,
     solved again (at most three times) when the line search asks for it. Returns ``(s,
     |R(trial)|)`` of the accepted step (the state is the trial), ``s = None`` when none
-    lowers the residual (the state back at ``x0``). ``curvature``: the contacts' curvature
-    term in the tangent."""
+    lowers the residual (the state back at ``x0``)."""
     state = eq.state
-    K = eq.tangent(state.x, curvature)  # shared by the retries of this iteration
+    K = eq.tangent(state.x)  # shared by the retries of this iteration
     run.guess = None  # the last linear solution, the guess of a retry
-    tightened = False
     redirections = opt.newton.redirections
     for attempt in range(redirections + 1):
-        dx, dlams = _direction(eq, opt, K, run)
+        dx, dlams, run.guess = eq.newton_direction(state.x, K, run.guess, run.eta)
         if limit_step is not None:
             f = limit_step(state.x, dx)
             if f < 1:
                 dx.data = f * dx
                 dlams = [f * d for d in dlams]
-        s, trial, tightened = _line_search(eq, state, x0, dx, dlams, norm, tol,
-                                           retry=attempt < redirections, tightened=tightened,
-                                           run=run, opt=opt)
+        s, trial = _line_search(eq, state, x0, dx, dlams, norm, tol,
+                                retry=attempt < redirections, opt=opt)
         if s is None or s > 0:
             return s, trial
         state.restore(x0)  # retry the direction at x0
@@ -244,68 +211,31 @@ def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol
     raise AssertionError("unreachable: the last attempt accepts a step or gives up")
 
 
-def _direction(eq: MixedEquations, opt: SolverOptions, K, run: _Inexact
-               ) -> tuple[ngs.BaseVector, list[np.ndarray]]:
-    """The Newton direction at the state; a Krylov solve that fails (it has asked for a
-    fresh AMG) is retried once at the tightest tolerance (unless ``retry_linear`` is off).
-    ConvergenceError when the linear solve fails."""
-    x = eq.state.x
-    try:
-        dx, dlams, run.guess = eq.newton_direction(x, K, run.guess, run.eta)
-    except ConvergenceError:
-        eta_min = opt.linear.eta_min
-        if run.eta is None or run.eta <= eta_min or not opt.linear.retry:
-            raise
-        log.debug("    Krylov solve failed: retrying with a fresh preconditioner")
-        run.eta = eta_min
-        dx, dlams, run.guess = eq.newton_direction(x, K, None, run.eta)
-    return dx, dlams
-
-
 def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVector,
                  dlams: list[np.ndarray], norm: float, tol: float, retry: bool,
-                 tightened: bool, run: _Inexact, opt: SolverOptions
-                 ) -> tuple[float | None, float, bool]:
+                 opt: SolverOptions) -> tuple[float | None, float]:
     """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
     ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
 
     Without ``options.newton.line_search`` the update is taken as it is where its residual
-    is finite. Returns ``(s, |R(trial)|, tightened)``: ``s > 0`` accepted (the state is the trial);
+    is finite. Returns ``(s, |R(trial)|)``: ``s > 0`` accepted (the state is the trial);
     ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
-    penetrating points were forced active, or a loose Krylov direction gave no step and
-    is solved 100x tighter (once per iteration: ``tightened``); ``s = None`` when no step
-    of at least 1/1024 lowers the residual (the state back at ``x0``).
+    penetrating points were forced active; ``s = None`` when no step of at least 1/1024
+    lowers the residual (the state back at ``x0``).
     """
-    x, nw, lin = state.x, opt.newton, opt.linear
+    x, nw = state.x, opt.newton
     s = 1.0
     while True:
         x.data = x0.x - s * dx
         state.set_multipliers([l0 - s * dl for l0, dl in zip(x0.lam, dlams, strict=True)])
         trial = eq.scaled_norm(eq.residual(x))
         if trial < (1 - nw.armijo * s) * norm or trial <= tol:
-            return s, trial, tightened
+            return s, trial
         if not nw.line_search and np.isfinite(trial):  # the (capped) update as it is
-            return s, trial, tightened
+            return s, trial
         if s == 1.0 and retry and eq.contact.force_penetrating():
-            return 0.0, trial, tightened
+            return 0.0, trial
         s *= nw.backtrack
-        if (s < nw.min_line_step and run.eta is not None and not tightened
-                and run.eta > lin.eta_min and retry):
-            # no step at all from a loose Krylov direction: before giving up (and
-            # cutting the load step) solve the direction 100x tighter. (Retrying at
-            # every short step instead cost a 1.54M-tet run an 812 s solve for the same
-            # 1/16 step: there the nonlinearity, not the direction, made the step short.)
-            run.tightened += 1
-            run.eta = run.cap = max(lin.eta_min, lin.tighten * run.eta)
-            log.debug("    line search failed at Krylov rtol %.1e: retrying tighter",
-                      run.eta / lin.tighten)
-            return 0.0, trial, True
         if s < nw.min_line_step:
             state.restore(x0)
-            return None, trial, tightened
-
-
-def _fraction(x: float) -> str:
-    """``x`` as ``1/n`` when it is one (a power-of-two step), else as a number."""
-    n = round(1 / x) if x > 0 else 0
-    return f"1/{n}" if n and 1 / n == x else f"{x:g}"
+            return None, trial

@@ -5,17 +5,16 @@ SolverOptions` holds one of each:
 
 - ``ramp`` (:class:`RampOptions`): the load ramp's steps and the driver's step control (cut,
   growth) (:mod:`brainbulge.solver.ramp`, :mod:`brainbulge.solver.driver`);
-- ``newton`` (:class:`NewtonOptions`): Newton's iterations, tolerances, line search and
-  stagnation stop (:mod:`brainbulge.solver.newton`);
+- ``newton`` (:class:`NewtonOptions`): Newton's iterations, tolerances and line search
+  (:mod:`brainbulge.solver.newton`);
 - ``linear`` (:class:`LinearOptions`): the linear solver and the inexact Newton's Krylov
   tolerances (:mod:`brainbulge.solver.inexact`);
 - ``krylov``, ``hotspot``: the Krylov solver's budget and AMG, the hotspot relaxation;
-- ``contrast``, ``sequencing``, ``rezoning``, ``warm_start``: the continuations.
+- ``rezoning``, ``warm_start``: the 2D rezoning and the start from another state.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from brainbulge.errors import InputError
@@ -33,47 +32,6 @@ class OptionGroup:
 
     def __post_init__(self) -> None:
         check_ranges(self)
-
-
-@dataclass(frozen=True)
-class ContrastOptions(OptionGroup):
-    """The stiffness-contrast path of a fine stage (:mod:`brainbulge.solver.contrast`)."""
-
-    start: float = option(
-        2.0, "the contrast mu_max / mu_min the path starts from (at most the model's): white "
-        "over gray matter (666 / 333 kPa), the parenchyma's own, where the 100k-tet "
-        "template's fine stage converges from the 25k-tet state (4 Newton iterations with a "
-        "2 or 8 mm edge); the upper bound: the model's contrast alone, no path",
-        unit=RATIO, range=(1.0, 1e6))
-    factor: float = option(
-        math.sqrt(10.0), "growth of the contrast per step (2 -> 6.3 -> 20 for the brain's "
-        "CSF)", unit=RATIO, range=(1.01, 1e3))
-    progress_iterations: int = option(
-        3, "each step's Newton solve gives up when its scaled residual is not below "
-        "progress_factor times its first after this many iterations (the converged steps "
-        "logged on the 100k- and 1.40M-tet templates fell 40-18,000x in 3)",
-        unit=" iterations", range=(1, 100))
-    progress_factor: float = option(
-        0.1, "the fall of the scaled residual each step requires within progress_iterations "
-        "(the converged steps fell to 2e-3-3e-2 of their first)", unit=RATIO,
-        range=(0.0, 1.0))
-
-
-@dataclass(frozen=True)
-class SequencingOptions(OptionGroup):
-    """Mesh sequencing, coarse mesh to fine (:mod:`brainbulge.solver.remesh.sequencing`)."""
-
-    coarse_tolerance: float = option(
-        1e-4, "the coarse stage's Newton tolerance on the scaled residual (never tighter "
-        "than the solve's): its state is only where the fine mesh starts, whose carried-over "
-        "residual is ~1e-2 (1.7e-2 at 1.40M from 111k tets, the same to four digits from a "
-        "coarse state at 1e-7); the 111k coarse ramp takes 6 Newton iterations instead of 9",
-        unit=RATIO, range=(1e-14, 1e-1))
-    fold_ratio: float = option(
-        0.2, "a contact point moved onto the obstacle goes back if an element of it is left "
-        "with less than this fraction of its reference measure (and less than before the "
-        "move): 18 folded tets at 1.40M under the skull's 2 mm rounded cut edge without it",
-        unit=RATIO, range=(0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -143,10 +101,6 @@ class KrylovOptions(OptionGroup):
         200, "GMRES restart length (basis vectors kept: 1.7 GB at 1.08M unknowns); with 100 "
         "the 1.40M-tet brain's fine-stage tangent stalled at 5.6e-2 after 200 iterations, it "
         "converges in 157 without a restart", unit=" vectors", range=(1, 100_000))
-    refresh_factor: float = option(
-        1.5, "rebuild the AMG hierarchies when a solve takes more than this times the "
-        "iterations of the first solve after the last set-up; no other value measured",
-        unit=RATIO, range=(1.0, 1e3))
     schur_drop: float = option(
         0.05, "couplings of the SIMPLE Schur approximation weaker than this times "
         "sqrt(|S_ii S_jj|) are lumped onto the diagonal before its AMG: on the 111k-tet "
@@ -217,27 +171,6 @@ class NewtonOptions(OptionGroup):
         1e-9, "on the scaled residual at full load (force / (mu L^(d-1)), volume / |Omega|): "
         "round-off of the assembled residual sits near 1e-12, the summaries' numbers are "
         "converged to their printed digits", unit=RATIO, range=(1e-14, 1e-1))
-    carried_curvature_tolerance: float = option(
-        1e-3, "from a carried-over state (mesh sequencing) the contacts' curvature term "
-        "enters the tangent only once the scaled residual is at most this: the exact "
-        "direction slid rim points by 5-8 mm along the skull's rounded cut edge and folded "
-        "elements (1.54M tets, 10 iterations); without the term far from the solution the "
-        "stage takes 6", unit=RATIO, range=(1e-14, 1e3),
-        label="carried_curvature_tolerance")
-    stagnation: int = option(
-        4, "an attempt stops, as failed, after this many Newton iterations in a row whose "
-        "line search took at most short_step and that together lowered the residual by less "
-        "than stagnation_progress (0: never); where the load path folds, the 2D alpha 80 / "
-        "beta 30 runs spent all 20 iterations on 0.1-0.4 % steps, attempt after attempt",
-        unit=" iterations", range=(0, 1000))
-    stagnation_progress: float = option(
-        0.95, "a run of short steps counts as stagnating while the residual stays above "
-        "this fraction of where the run began (less than 5 % lower)", unit=RATIO,
-        range=(0.0, 1.0), label="stagnation_progress")
-    short_step: float = option(
-        1 / 64, "a line-search step of at most this is short (six halvings): it moves the "
-        "state but says the direction is poor", unit=RATIO, range=(0.0, 1.0),
-        label="short_step")
     min_line_step: float = option(
         1 / 1024, "the line search gives up below this step (ten halvings): a smaller step "
         "changes the residual only by round-off", unit=RATIO, range=(1e-12, 1.0),
@@ -250,9 +183,9 @@ class NewtonOptions(OptionGroup):
         "(1 - armijo s) |R_0| (the textbook value, Nocedal & Wright)", unit=RATIO,
         range=(0.0, 0.5))
     redirections: int = option(
-        3, "times one Newton iteration's direction may be solved again (penetrating points "
-        "forced active, or a loose Krylov direction solved tighter) before its line search "
-        "must decide", unit=" solves", range=(0, 100))
+        3, "times one Newton iteration's direction may be solved again with penetrating "
+        "points forced active before its line search must decide", unit=" solves",
+        range=(0, 100))
     slow_newton_s: float = option(
         30.0, "a Newton solve running longer than this logs each iteration at INFO (else "
         "DEBUG), so a long fine-mesh solve shows its progress (negative: always)",
@@ -288,21 +221,13 @@ class LinearOptions(OptionGroup):
         "cases' default from 400k tets, where PARDISO runs out of memory)",
         choices=LINEAR_SOLVERS, label="linear_solver")
     eta_min: float = option(
-        1e-10, "the tightest relative tolerance of an inexact Newton's Krylov solve (a "
-        "retry after a failed solve, the floor of the forcing term): near GMRES's "
-        "round-off at 1e6 unknowns", unit=RATIO, range=(1e-16, 1e-2), label="eta_min")
+        1e-10, "the tightest relative tolerance of an inexact Newton's Krylov solve (the "
+        "floor of the forcing term): near GMRES's round-off at 1e6 unknowns", unit=RATIO,
+        range=(1e-16, 1e-2), label="eta_min")
     eta_max: float = option(
         1e-4, "the loosest relative tolerance of an inexact Newton's Krylov solve (the "
         "forcing term's cap): with the floor winning instead a 1.19M-tet brain's Newton "
         "stalled at |R| 1.5e-7", unit=RATIO, range=("eta_min", 0.999), label="eta_max")
-    tighten: float = option(
-        1e-2, "a loose Krylov direction whose line search found no step is solved again "
-        "this factor tighter (once per iteration; at every short step instead cost a "
-        "1.54M-tet run 812 s for the same 1/16 step)", unit=RATIO, range=(1e-8, 1.0))
-    retry: bool = option(
-        True, "a failed Krylov solve is retried once, at eta_min, with a fresh "
-        "preconditioner (False: the Newton solve fails at once, e.g. from a start state "
-        "that a ramp can replace)", label="retry_linear")
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -2,7 +2,7 @@
 
 Every tunable of a solve is a field of a frozen group of :class:`SolverOptions` (the
 options tree, :mod:`brainbulge.solver.option_groups`: ``ramp``, ``newton``, ``linear``,
-``krylov``, ``hotspot``, ``contrast``, ``sequencing``, ``rezoning``, ``warm_start``), declared
+``krylov``, ``hotspot``, ``rezoning``, ``warm_start``), declared
 once with :func:`~brainbulge.model.options.option`: default, unit, range and the reason for
 the default; a group checks its ranges when built.
 
@@ -24,7 +24,6 @@ from brainbulge.errors import ConvergenceError, InputError
 from brainbulge.solver.option_groups import (
     LINEAR_SOLVERS,
     RATIO,
-    ContrastOptions,
     HotspotOptions,
     KrylovOptions,
     LinearOptions,
@@ -32,14 +31,13 @@ from brainbulge.solver.option_groups import (
     OptionGroup,
     RampOptions,
     RezoningOptions,
-    SequencingOptions,
     WarmStartOptions,
 )
 
-__all__ = ["DIVERGENCE_ADVICE", "LINEAR_SOLVERS", "RATIO", "SHORTHAND", "ContrastOptions",
+__all__ = ["DIVERGENCE_ADVICE", "LINEAR_SOLVERS", "RATIO", "SHORTHAND",
            "Costs", "Failure", "HotspotOptions", "KrylovOptions", "LinearOptions",
            "NewtonOptions", "OptionGroup", "RampOptions", "RezoningOptions",
-           "SequencingOptions", "Solution", "SolverOptions", "StepRecord", "WarmStartOptions"]
+           "Solution", "SolverOptions", "StepRecord", "WarmStartOptions"]
 
 if TYPE_CHECKING:
     from brainbulge.solver.mixed import MixedForm
@@ -58,14 +56,11 @@ SHORTHAND = {
     "intermediate_tolerance": ("ramp", "intermediate_tolerance"),
     "max_iterations": ("newton", "max_iterations"),
     "tolerance": ("newton", "tolerance"),
-    "carried_curvature_tolerance": ("newton", "carried_curvature_tolerance"),
-    "stagnation": ("newton", "stagnation"),
     "slow_newton_s": ("newton", "slow_newton_s"),
     "closed_form": ("newton", "closed_form"),
     "hotspot_relaxation": ("newton", "hotspot_relaxation"),
     "linear_solver": ("linear", "solver"),
     "eta_max": ("linear", "eta_max"),
-    "retry_linear": ("linear", "retry"),
 }
 
 
@@ -73,11 +68,10 @@ SHORTHAND = {
 class SolverOptions:
     """What a solve is asked to do: the options tree's groups
     (:mod:`brainbulge.solver.option_groups`: every tunable, declared once), and what is not a
-    tunable: where the ramp starts, a continuation's requirement on each Newton solve, the
-    stop hooks, the restart file and the progress bar. A solver takes them at construction;
-    for other values build another one (``dataclasses.replace(options, ...)``; a group:
-    ``dataclasses.replace(options.newton, ...)``). The keywords of :data:`SHORTHAND` set a
-    group's field by its old flat name."""
+    tunable: where the ramp starts, the stop hooks, the restart file and the progress bar. A
+    solver takes them at construction; for other values build another one
+    (``dataclasses.replace(options, ...)``; a group: ``dataclasses.replace(options.newton,
+    ...)``). The keywords of :data:`SHORTHAND` set a group's field by its old flat name."""
 
     # --- the options tree (frozen groups) ------------------------------------------------
     ramp: RampOptions = field(default_factory=RampOptions)
@@ -85,18 +79,12 @@ class SolverOptions:
     linear: LinearOptions = field(default_factory=LinearOptions)
     krylov: KrylovOptions = field(default_factory=KrylovOptions)
     hotspot: HotspotOptions = field(default_factory=HotspotOptions)
-    contrast: ContrastOptions = field(default_factory=ContrastOptions)
-    sequencing: SequencingOptions = field(default_factory=SequencingOptions)
     rezoning: RezoningOptions = field(default_factory=RezoningOptions)
     warm_start: WarmStartOptions = field(default_factory=WarmStartOptions)
 
     # --- not tunables: set by the code paths and the caller's I/O ------------------------
     #: load factor [-] of the form's current state, where the ramp starts
     start_load: float = 0.0
-    #: ``(k, f)``: a Newton solve whose scaled residual is not below ``f`` times its first
-    #: after ``k`` iterations gives up (set by the contrast path from ``contrast``; None: no
-    #: such requirement)
-    required_progress: tuple[int, float] | None = None
     #: asked after each accepted load step below full load; ``True`` stops the ramp there
     #: (the state is kept, ``converged`` is false, ``stopped_early`` true)
     stop_when: Callable[[], bool] | None = None
@@ -161,7 +149,7 @@ class Failure:
     #: the last Newton attempt's scaled residual [-] and iterations when it gave up
     residual: float = float("nan")
     iterations: int = 0
-    #: why that attempt gave up (e.g. "stagnated: ...", "max_iterations = 20 reached")
+    #: why that attempt gave up (e.g. "max_iterations = 20 reached")
     reason: str = ""
 
     def describe(self, advice: str = DIVERGENCE_ADVICE) -> str:
@@ -183,8 +171,8 @@ class Failure:
 @dataclass
 class Costs:
     """What solves cost, added up: assembly and linear-solve time [s] and Krylov iterations
-    (0 with a direct solver). The one place where the costs of several solves (the stages of
-    mesh sequencing, the steps of the contrast path, the meshes of rezoning) are summed."""
+    (0 with a direct solver). The one place where the costs of several solves (the meshes of
+    rezoning) are summed."""
 
     assembly_time_s: float = 0.0
     solve_time_s: float = 0.0
@@ -233,9 +221,6 @@ class Solution:
     context: str = ""  # appended in parentheses (e.g. a rezoning that failed)
     #: the route the solve took (:class:`~brainbulge.solver.strategy.Route`'s value)
     route: str = "ramp"
-    #: mesh sequencing's coarse stage (:class:`~brainbulge.solver.remesh.sequencing.Sequenced`;
-    #: None without)
-    sequenced: Any = None
     #: from a start state: True when Newton converged from it, False when the load was
     #: ramped instead; None without a start state
     started: bool | None = None

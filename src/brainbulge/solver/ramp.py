@@ -7,8 +7,7 @@ load factor by ``dt``, predicts the new state by extrapolating the last incremen
 
     x_pred = x_prev + (dt / dt_last) (x_prev - x_before),
 
-and solves from it (without ``predictor``: from the last converged state); if that fails,
-once more from the last converged state. A step that still
+and solves from it (without ``predictor``: from the last converged state). A step that
 fails is cut, ``dt <- cut dt``, and retried from the last converged state; a step that
 converged within ``fast_iterations`` lets the next grow, ``dt <- grow dt`` (``options.ramp``:
 0.5, 4 and 1.5), or, with ``slide``, the next step is sized by how far the last one moved
@@ -30,7 +29,6 @@ import time
 from pathlib import Path
 
 import ngsolve as ngs
-import numpy as np
 from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
@@ -71,13 +69,13 @@ class NewtonSolver:
         #: the trust region on each update (option ``newton.step_cap``)
         self.step_cap = StepCap(form, cap) if cap > 0 else None
 
-    def newton(self, tolerance: float | None = None, curvature_below: float = np.inf,
+    def newton(self, tolerance: float | None = None,
                limit_step: StepLimit | None = None) -> NewtonResult:
         """One Newton solve at the form's load from its state (:func:`newton`), each update
         within the options' step cap unless ``limit_step`` is given."""
         relax = None if self.relaxation is None else self.relaxation.relax
-        return newton(self.equations, self.opt, tolerance, curvature_below,
-                      limit_step or self.step_cap, relax=relax)
+        return newton(self.equations, self.opt, tolerance, limit_step or self.step_cap,
+                      relax=relax)
 
     def release_linear_solver(self) -> None:
         """Free the linear solver's work memory (:meth:`MixedEquations.release_linear_solver`)."""
@@ -92,20 +90,16 @@ class NewtonSolver:
         sol = walk(LoadRamp(self))
         return finished(self.equations, sol, start)
 
-    def equilibrate(self, curvature_below: float | None = None) -> Solution:
-        """Newton at the form's current load from its current state (one carried over
-        from another mesh, :mod:`brainbulge.solver.remesh.sequencing`, or another flap's
-        solution), to the final tolerance, without load steps, the curvature term of the
-        contacts entering the tangent only below ``curvature_below`` (default
-        ``newton.carried_curvature_tolerance``; ``inf``: always). On failure the state is
+    def equilibrate(self) -> Solution:
+        """Newton at the form's current load from its current state (another flap's
+        solution), to the final tolerance, without load steps. On failure the state is
         restored and ``converged`` is false."""
         form, state = self.form, self.state
         start = time.perf_counter()
         t = state.load
         sol = Solution(form=form, load=t, converged=False)
         before = state.snapshot()
-        res = self.newton(curvature_below=(self.opt.newton.carried_curvature_tolerance
-                                           if curvature_below is None else curvature_below))
+        res = self.newton()
         sol.newton_results.append(res)
         if res.converged:
             pen = self.equations.max_penetration() if form.contacts_present else 0.0
@@ -186,9 +180,8 @@ class LoadRamp:
 
     def attempt(self, t: float, dt: float, last: Snapshot) -> Tried:
         """Newton at load ``t`` (a step ``dt`` on) from the predicted state, extrapolating
-        the last increment, ``x_pred = x_last + (dt / dt_last) increment``, and, if that
-        fails, once more from the last converged state ``last`` (its ``x`` at the new load's
-        prescribed values, with the failed attempt's contact pressures)."""
+        the last increment, ``x_pred = x_last + (dt / dt_last) increment`` (``last``: the
+        last converged state)."""
         form, opt, state = self.form, self.opt, self.state
         sol_results = self.sol.newton_results
         form.set_load(t)
@@ -200,17 +193,10 @@ class LoadRamp:
         tol = newton_tol if t >= FULL else max(newton_tol, opt.ramp.intermediate_tolerance)
         res = self.solver.newton(tol)
         sol_results.append(res)
-        its = res.iterations
-        if not res.converged and self.predictor is not None and opt.ramp.predictor:
-            state.restore(last, multipliers=False)
-            form.set_load(t)
-            res = self.solver.newton(tol)
-            sol_results.append(res)
-            its += res.iterations
         motion = None
         if res.converged and self.slide is not None:
             motion = self.slide(last.x.FV().NumPy(), state.x.FV().NumPy())
-        return Tried(res.converged, its, res, motion)
+        return Tried(res.converged, res.iterations, res, motion)
 
     def accept(self, t: float, dt: float, last: Snapshot, tried: Tried,
                sol: Solution) -> None:

@@ -2,21 +2,19 @@
 caller offers: :meth:`Strategy.from_problem`, then :func:`solve`.
 
 A caller (a study) describes; it does not wire solvers. It gives the problem, the options
-and the means it has: how to remesh the deformed domain (:class:`Rezoning`, 2D), a coarse
-problem of the same domain (mesh sequencing, 3D), a start state (another flap's solution).
+and the means it has: how to remesh the deformed domain (:class:`Rezoning`, 2D), a start
+state (another flap's solution).
 The strategy picks the path:
 
 - a restart file of the options' ``checkpoint`` exists: the load ramp goes on from it
-  (neither a coarse mesh nor a start state is used);
-- a coarse problem: mesh sequencing (the coarse ramp, the contrast path on the fine mesh,
-  else the fine ramp from ``Js = 1``; :mod:`brainbulge.solver.remesh.sequencing`);
+  (a start state is not used);
 - a start state: Newton from it with the warm start's options
   (:class:`~brainbulge.solver.options.WarmStartOptions`), else the ramp from ``Js = 1``;
 - a rezoning: the ramp with 2D rezoning (:mod:`brainbulge.solver.remesh.rezoning`);
 - otherwise the load ramp (:mod:`brainbulge.solver.ramp`).
 
-The :class:`~brainbulge.solver.options.Solution` says which route ran (``route``), what a
-coarse stage did (``sequenced``) and whether a start state converged (``started``).
+The :class:`~brainbulge.solver.options.Solution` says which route ran (``route``) and
+whether a start state converged (``started``).
 """
 
 from __future__ import annotations
@@ -33,10 +31,9 @@ from brainbulge.model.problem import Problem
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Solution, SolverOptions
 from brainbulge.solver.remesh.rezoning import Rezoning, solve_with_rezoning
-from brainbulge.solver.remesh.sequencing import Sequenced, solve_sequenced
 from brainbulge.solver.warm_start import solve_from_start
 
-__all__ = ["Rezoning", "Route", "Sequenced", "Strategy", "solve"]
+__all__ = ["Rezoning", "Route", "Strategy", "solve"]
 
 log = logging.getLogger("brainbulge")
 
@@ -50,21 +47,19 @@ class Route(enum.Enum):
 
     RAMP = "ramp"
     REZONING = "rezoning"
-    SEQUENCING = "sequencing"
     WARM_START = "warm start"
 
 
 @dataclasses.dataclass(frozen=True)
 class Strategy:
     """How :func:`solve` reaches full load: the ``route``, the options, the element and the
-    means the route needs (``rezoning``, the ``coarse`` problem, the ``start`` state)."""
+    means the route needs (``rezoning``, the ``start`` state)."""
 
     route: Route
     options: SolverOptions
     element: str = "taylor-hood"
     compile_energy: bool = False
     rezoning: Rezoning | None = None
-    coarse: Problem | None = None
     start: Start | None = None
 
     @classmethod
@@ -76,21 +71,14 @@ class Strategy:
         element: str = "taylor-hood",
         compile_energy: bool = False,
         rezoning: Rezoning | None = None,
-        coarse: Problem | Callable[[], Problem | None] | None = None,
         start: Start | None = None,
     ) -> Strategy:
-        """The route for ``problem`` (module docstring). ``coarse`` may be a function that
-        builds the coarse problem (or says there is none): it is called only when the route
-        can use it (not when a restart file is there)."""
+        """The route for ``problem`` (module docstring)."""
         options = options or SolverOptions()
         base = {"options": options, "element": element, "compile_energy": compile_energy}
         checkpoint = options.checkpoint
         if checkpoint is not None and Path(checkpoint).is_file():
             return cls(Route.RAMP, **base)  # an interrupted ramp goes on where it stopped
-        if callable(coarse):
-            coarse = coarse()
-        if coarse is not None:
-            return cls(Route.SEQUENCING, coarse=coarse, **base)
         if start is not None:
             return cls(Route.WARM_START, start=start, **base)
         if rezoning is not None:
@@ -108,13 +96,6 @@ class Strategy:
             return _routed(solve_with_rezoning(problem, self.rezoning, self.element, opt),
                            self.route)
         form = MixedForm(problem, element=self.element, compile_energy=self.compile_energy)
-        if self.route is Route.SEQUENCING:
-            assert self.coarse is not None
-            coarse = MixedForm(self.coarse, element=self.element,
-                               compile_energy=self.compile_energy)
-            sol, sequenced = solve_sequenced(coarse, form, opt)
-            sol.sequenced = sequenced
-            return _routed(sol, self.route)
         if self.route is Route.WARM_START:
             assert self.start is not None
             return _routed(solve_from_start(form, opt, self.start), self.route)

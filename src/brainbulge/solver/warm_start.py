@@ -4,10 +4,8 @@ load ramp from ``Js = 1``.
 A start at full load converges in a few Newton iterations when it is close (a smaller flap
 at the same centre), or not at all; so Newton from it runs with a small budget
 (:class:`~brainbulge.solver.options.WarmStartOptions`: ``max_iterations`` Newton and
-``krylov_iterations`` GMRES iterations per linear solve), a failed Krylov solve is not
-retried, and the contacts' curvature term is in the tangent from the first iteration (the
-start is another equilibrium, not a state carried over from a coarser mesh). If that does not
-converge, the state is reset and the load ramped as without a start.
+``krylov_iterations`` GMRES iterations per linear solve). If that does not converge, the
+state is reset and the load ramped as without a start.
 """
 
 from __future__ import annotations
@@ -15,8 +13,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Callable
-
-import numpy as np
 
 from brainbulge.solver.driver import fallback
 from brainbulge.solver.mixed import MixedForm
@@ -31,7 +27,6 @@ def warm_start_options(options: SolverOptions) -> SolverOptions:
     warm = options.warm_start
     return dataclasses.replace(
         options, newton=dataclasses.replace(options.newton, max_iterations=warm.max_iterations),
-        linear=dataclasses.replace(options.linear, retry=False),
         krylov=dataclasses.replace(options.krylov, max_iterations=warm.krylov_iterations))
 
 
@@ -51,7 +46,7 @@ def solve_from_start(form: MixedForm, options: SolverOptions,
             return None
         # (Krylov: a start whose tangent GMRES cannot solve ramps at once)
         solver = NewtonSolver(form, warm_start_options(options))
-        sol = solver.equilibrate(curvature_below=np.inf)  # the exact tangent throughout
+        sol = solver.equilibrate()
         started = sol.converged
         solver.release_linear_solver()
         if not sol.converged:

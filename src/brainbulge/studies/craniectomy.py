@@ -56,7 +56,6 @@ from brainbulge.model.brain import (
     brain_mesh_for,
     brain_problem,
     case_skull,
-    coarse_brain_mesh_for,
     size_defaults,
 )
 from brainbulge.model.problem import case_from_config
@@ -107,21 +106,18 @@ def run_brain(
     out_dir: Path,
     progress: bool = False,
     brain_mesh: BrainMesh | None = None,
-    coarse_brain_mesh: BrainMesh | None = None,
 ) -> dict[str, Any]:
     """Solve one 3D scenario; write its files into ``out_dir``; return the summary.
 
-    ``brain_mesh`` and ``coarse_brain_mesh`` (mesh sequencing) are used instead of loading or
-    building the case's meshes."""
-    run = solve_brain(config, out_dir, progress, brain_mesh, coarse_brain_mesh)
+    ``brain_mesh`` is used instead of loading or building the case's mesh."""
+    run = solve_brain(config, out_dir, progress, brain_mesh)
     return write_brain_outputs(run, out_dir)
 
 
 @dataclasses.dataclass
 class BrainRun:
     """A solved 3D scenario: its case, mesh, rigid skull (the one of the run, made once),
-    form and solution; ``sequenced``: the coarse stage of mesh sequencing (None without);
-    ``started``: ``True`` when Newton converged from a given start state
+    form and solution; ``started``: ``True`` when Newton converged from a given start state
     (``solve_brain(start=...)``), ``False`` when it did not and the load was ramped from
     ``Js = 1``, None without a start."""
 
@@ -130,7 +126,6 @@ class BrainRun:
     skull: Any
     form: MixedForm
     sol: Any
-    sequenced: Any = None
     started: bool | None = None
 
 
@@ -139,7 +134,6 @@ def solve_brain(
     out_dir: Path,
     progress: bool = False,
     brain_mesh: BrainMesh | None = None,
-    coarse_brain_mesh: BrainMesh | None = None,
     start=None,
 ) -> BrainRun:
     """Solve one 3D scenario (``restart.npz`` in ``out_dir`` while the load ramps).
@@ -147,7 +141,7 @@ def solve_brain(
     ``start(form) -> bool``: set the form's state to a start at full load (e.g. the solution
     of another flap on this mesh) and say whether it did; Newton then converges from there
     (:mod:`brainbulge.solver.warm_start`), and ramps the load from ``Js = 1`` if that fails.
-    Not used with a restart file (the ramp goes on) or mesh sequencing; the solver chooses
+    Not used with a restart file (the ramp goes on); the solver chooses
     (:class:`~brainbulge.solver.strategy.Strategy`)."""
     case = config if isinstance(config, CraniectomyCase) else case_from_dict(dict(config))
     out_dir = Path(out_dir)
@@ -157,7 +151,7 @@ def solve_brain(
     problem = brain_problem(bm, case, skull)
     restart = out_dir / "restart.npz"
     inputs = {k: v for k, v in dataclasses.asdict(case).items()
-              if k not in ("steps", "coarse_tets", "coarse_mesh")}
+              if k != "steps"}
     mesh_hash = hashlib.sha1(np.ascontiguousarray(bm.nodes_mm).tobytes()
                              + np.ascontiguousarray(bm.tets).tobytes()).hexdigest()
     key = json.dumps([inputs, mesh_hash], sort_keys=True, default=str)
@@ -165,21 +159,11 @@ def solve_brain(
                             linear_solver=case.linear_solver, checkpoint=restart,
                             checkpoint_key=key)
 
-    def coarse_problem():
-        """Mesh sequencing's coarse problem, or None (the case has no coarse mesh)."""
-        coarse_bm = coarse_brain_mesh if coarse_brain_mesh is not None else (
-            coarse_brain_mesh_for(case, bm))
-        if coarse_bm is None:
-            return None
-        _check_same_domain(coarse_bm, bm)
-        return brain_problem(coarse_bm, case)
-
     sol = solve(problem, Strategy.from_problem(
-        problem, options, element=case.element, compile_energy=case.compile,
-        coarse=coarse_problem, start=start))
+        problem, options, element=case.element, compile_energy=case.compile, start=start))
     if sol.converged:
         restart.unlink(missing_ok=True)
-    return BrainRun(case, bm, skull, sol.form, sol, sol.sequenced, sol.started)
+    return BrainRun(case, bm, skull, sol.form, sol, sol.started)
 
 
 def write_brain_outputs(
@@ -198,8 +182,6 @@ def write_brain_outputs(
     G = recovered_gradient(form.mesh, form.output_displacement())  # one projection for all
     points = point_fields(form, bm.envelope.centre_mm(), fibres, G)
     summary = brain_summary(case, bm, sol, points, run.skull)
-    summary["mesh_sequencing"] = (None if run.sequenced is None
-                                  else dataclasses.asdict(run.sequenced))
     summary.update(extra or {})
     if measures is not None:
         summary.update(measures(points))
@@ -224,26 +206,6 @@ def write_brain_outputs(
     if not sol.converged:
         raise ConvergenceError(f"{sol.message}; partial results in {out_dir}")
     return summary
-
-
-#: mesh sequencing: largest relative volume difference between the coarse and the fine mesh
-#: (two meshes of one segmentation differ by < 1 %: ICBM152 20k / 111k / 1.54M tets
-#: 2,024 / 2,030 / 2,032 ml)
-SAME_DOMAIN_RTOL = 0.05
-
-
-def _check_same_domain(coarse: BrainMesh, fine: BrainMesh) -> None:
-    """Refuse a coarse mesh of another brain (before any solve)."""
-    v_c = brain_volume_ml(coarse.nodes_mm, coarse.tets)
-    v_f = brain_volume_ml(fine.nodes_mm, fine.tets)
-    if abs(v_c - v_f) > SAME_DOMAIN_RTOL * v_f:
-        raise InputError(
-            f"the coarse mesh ({v_c:.0f} ml) is not of the same brain as the mesh ({v_f:.0f} "
-            "ml); build it from the same segmentation and options with `brainbulge mesh`")
-    if not np.array_equal(np.unique(coarse.material_names()),
-                          np.unique(fine.material_names())):
-        raise InputError("the coarse mesh has other regions than the mesh; build it from the "
-                         "same segmentation and label map with `brainbulge mesh`")
 
 
 def brain_summary(
@@ -381,10 +343,8 @@ def study_task(scenario: dict[str, Any], scenario_dir: Path) -> dict[str, Any]:
     """Runner task: one 3D scenario (``name`` is the folder, the rest the case). The
     scenarios of a study share their meshes: a worker reads each ``brain.npz`` once."""
     config = dict(scenario)
-    meshes = {key: _cached_brain_mesh(str(config[key])) if config.get(key) else None
-              for key in ("mesh", "coarse_mesh")}
-    summary = run_brain(config, scenario_dir, brain_mesh=meshes["mesh"],
-                        coarse_brain_mesh=meshes["coarse_mesh"])
+    mesh = _cached_brain_mesh(str(config["mesh"])) if config.get("mesh") else None
+    summary = run_brain(config, scenario_dir, brain_mesh=mesh)
     return {k: v for k, v in summary.items() if k != "inputs"}
 
 
@@ -420,43 +380,32 @@ def prepare_study_mesh(out_dir: Path, common: dict[str, Any], folder: str = "mes
                 "resume with the same mesh options or pass --overwrite"
             )
         return path
-    case = case_from_dict({k: v for k, v in common.items() if k not in ("mesh", "coarse_mesh")})
+    case = case_from_dict({k: v for k, v in common.items() if k != "mesh"})
     bm = brain_mesh_for(case)
     save_brain_mesh(bm, path.parent)
     atomic_write_text(spec_path, json.dumps(spec))
-    if bm.unrefined is not None:  # the nested coarse mesh of sequencing, from the same Netgen run
-        coarse = {**common, "tets": case.coarse_tets, "refine": None}
-        coarse_dir = Path(out_dir) / "coarse-mesh"
-        save_brain_mesh(bm.unrefined, coarse_dir)
-        atomic_write_text(coarse_dir / "spec.json", json.dumps(
-            json.loads(json.dumps({k: coarse.get(k) for k in keys}))))
     return path
 
 
 def attach_study_meshes(out_dir: Path, scenarios: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The scenarios with the study's shared meshes attached: ``mesh`` (built once from the
-    first scenario's mesh options, which are then dropped) and, for mesh sequencing with
-    ``coarse_tets``, ``coarse_mesh`` (built once at that size, unrefined: with ``coarse_tets =
-    tets / 8**refine`` the Netgen mesh that the fine one refines)."""
+    """The scenarios with the study's shared mesh attached: ``mesh`` (built once from the
+    first scenario's mesh options, which are then dropped)."""
     if not scenarios[0].get("mesh"):  # the defaults of the requested size, for all
         scenarios = [with_size_defaults(sc) for sc in scenarios]
     common = scenarios[0]
     mesh = prepare_study_mesh(out_dir, common)
     shared: dict[str, Any] = {"mesh": str(mesh)}
-    if common.get("coarse_tets") and not common.get("mesh"):
-        coarse = {**common, "tets": common["coarse_tets"], "refine": 0, "coarse_tets": None}
-        shared["coarse_mesh"] = str(prepare_study_mesh(out_dir, coarse, "coarse-mesh"))
-    drop = (*MESH_OPTIONS, "coarse_tets")
-    return [{**{k: v for k, v in sc.items() if k not in drop}, **shared} for sc in scenarios]
+    return [{**{k: v for k, v in sc.items() if k not in MESH_OPTIONS}, **shared}
+            for sc in scenarios]
 
 
 def with_size_defaults(scenario: dict[str, Any]) -> dict[str, Any]:
-    """``scenario`` with ``refine``, ``coarse_tets`` and ``linear_solver`` of its size
+    """``scenario`` with ``refine`` and ``linear_solver`` of its size
     (:func:`~brainbulge.model.brain.size_defaults`) where it does not give them."""
-    refine, coarse, solver = size_defaults(
+    refine, solver = size_defaults(
         scenario.get("tets", CraniectomyCase.tets), scenario.get("refine"),
-        scenario.get("coarse_tets"), scenario.get("linear_solver"))
-    return {**scenario, "refine": refine, "coarse_tets": coarse, "linear_solver": solver}
+        scenario.get("linear_solver"))
+    return {**scenario, "refine": refine, "linear_solver": solver}
 
 
 def run_study_with_report(out_dir: Path, scenarios: list[dict[str, Any]],

@@ -20,10 +20,9 @@ full load from the finished state (``state.npz``) of the plan at the same centre
 next smaller diameter: that flap lies inside this one, so its state is admissible (no tissue
 inside the bone) and only the newly opened skull lets go. Where that state is missing (the
 smallest diameter, or still running on another worker) or Newton does not converge from it,
-the load is ramped from ``Js = 1`` as for any scenario (or mesh sequencing, with
-``coarse_tets``/``coarse_mesh``); with GMRES a first linear solve that fails gives the start
-up at once (``SolverOptions.warm_start``). The state
-reached is the same equilibrium to within the solver's tolerance (tests/test_plan.py).
+the load is ramped from ``Js = 1`` as for any scenario; with GMRES a first linear solve
+that fails gives the start up at once (``SolverOptions.warm_start``). The state reached is
+the same equilibrium to within the solver's tolerance (tests/test_plan.py).
 
 **Damage measures** come from the fields the summary samples at its integration points
 (``write_brain_outputs(..., measures=...)``): one sampling, one recovered gradient per plan.
@@ -199,7 +198,7 @@ def shared_mesh(path: str) -> BrainMesh:
 def _state_key(case: CraniectomyCase, bm: BrainMesh) -> str:
     """What a start state must share with a plan: the mesh and every input but the flap."""
     skip = ("flap", "flap_centre_mm", "flap_diameter_mm", "name", "extra", "steps",
-            "tolerance", "coarse_tets", "coarse_mesh")
+            "tolerance")
     inputs = {k: v for k, v in dataclasses.asdict(case).items() if k not in skip}
     mesh = hashlib.sha1(np.ascontiguousarray(bm.nodes_mm).tobytes()
                         + np.ascontiguousarray(bm.tets).tobytes()).hexdigest()

@@ -157,8 +157,8 @@ def paper_brain_options(tets: int, fix: str = "inferior+superior") -> dict[str, 
 
     common: dict[str, Any] = {"tets": tets, **PAPER_SCALING, "steps": 4, "fix": fix}
     if tets >= LARGE_TETS:  # a refined mesh, Krylov
-        refine, coarse_tets, solver = size_defaults(tets)
-        common.update(refine=refine, coarse_tets=coarse_tets, linear_solver=solver)
+        refine, solver = size_defaults(tets)
+        common.update(refine=refine, linear_solver=solver)
     return common
 
 

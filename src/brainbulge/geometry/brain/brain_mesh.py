@@ -79,8 +79,6 @@ class BrainMesh:
     #: the voxel grid of the label image the mesh was built from (None: unknown, e.g. a
     #: ``brain.npz`` written before meshes kept it); the NIfTI maps are written on it
     image_grid: ImageGrid | None = None
-    #: the Netgen mesh this one was refined from, labelled alike (``keep_unrefined``)
-    unrefined: BrainMesh | None = field(default=None, repr=False, compare=False)
 
     def tet_volumes_mm3(self) -> np.ndarray:
         """Volume of each tet (mm^3)."""
@@ -202,7 +200,6 @@ def build_brain_mesh(
     frontal_area_ratio: float = 2.0,
     refinements: int = 0,
     refine_onto_envelope: bool = True,
-    keep_unrefined: bool = False,
     fit_tissue_interfaces: bool = True,
 ) -> BrainMesh:
     """Build the labelled brain mesh (see module docstring).
@@ -219,10 +216,10 @@ def build_brain_mesh(
     ``custom`` when its centre is given (by the fitting rule,
     :func:`~brainbulge.geometry.brain.flap_fit.open_flap`). ``refinements``: Netgen meshes at about
     ``target_tets / 8**refinements`` tets, which is then refined uniformly that many times
-    (:mod:`refine`: new surface nodes on the envelope), so that mesh sequencing can start
-    from the exact coarse solution: tissues are tagged (and their interfaces fitted) on the
-    Netgen mesh and every child tet keeps its parent's, so the refined mesh's interfaces are
-    the Netgen mesh's; sides, base and flaps are tagged on the final mesh.
+    (:mod:`refine`: new surface nodes on the envelope): tissues are tagged (and their
+    interfaces fitted) on the Netgen mesh and every child tet keeps its parent's, so the
+    refined mesh's interfaces are the Netgen mesh's; sides, base and flaps are tagged on the
+    final mesh.
     ``refine_onto_envelope=False`` leaves the new surface nodes at their midpoints: the
     refined mesh then has exactly the Netgen mesh's geometry (its surface chords), the
     geometry a Taylor-Hood solution on the Netgen mesh sees, for comparisons of elements and
@@ -268,7 +265,6 @@ def build_brain_mesh(
     t0 = time.perf_counter()
     nodes, tissue = _tissues(nodes, tets, image, envelope, midsagittal, fit_tissue_interfaces)
     timings["tags"] = time.perf_counter() - t0
-    netgen_mesh = nodes, tets, tissue
     if refinements:
         t0 = time.perf_counter()
         nodes, tets, parent = refined_on_envelope(nodes, tets, envelope, refinements,
@@ -285,8 +281,6 @@ def build_brain_mesh(
                          frontal_area_ratio)
 
     mesh = label(nodes, tets, tissue)
-    if keep_unrefined and refinements:
-        mesh.unrefined = label(*netgen_mesh)
     if custom_flap_centre_mm is not None:  # the one rule of every custom flap
         from brainbulge.geometry.brain.flap_fit import open_flap
 

@@ -201,13 +201,11 @@ def fit_flap(bm: BrainMesh, centre_mm, diameter_mm: float, band: SuperiorBand | 
 def open_flap(bm: BrainMesh, centre_mm, diameter_mm: float, band: SuperiorBand | None = None,
               name: str = "custom") -> FlapFit:
     """The one rule that turns a requested flap (a centre near the skull and a diameter) into
-    the flap open on ``bm`` (and on its ``unrefined`` mesh, if kept): :func:`fit_flap`, then
+    the flap open on ``bm``: :func:`fit_flap`, then
     :func:`attach_flap` (an `InputError` saying why if it does not fit). Every custom flap,
     of ``brainbulge mesh``, ``brain`` and ``plan``, is made here."""
     fit = fit_flap(bm, centre_mm, diameter_mm, band, name)
     attach_flap(bm, fit)
-    if bm.unrefined is not None:
-        attach_flap(bm.unrefined, fit_flap(bm.unrefined, centre_mm, diameter_mm, band, name))
     return fit
 
 

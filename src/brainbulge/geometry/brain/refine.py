@@ -4,8 +4,8 @@ Each tet is cut into eight: four corner tets at its vertices and four around the
 diagonal of the inner octahedron (Bey's rule with the shortest diagonal; the children's
 shapes stay within a bounded number of classes, so the quality does not decay with repeated
 refinement). A refined mesh is nested in the one it came from: every coarse P1 function is
-exactly a fine P1 function, which is what mesh sequencing wants (the coarse solution carried
-over without interpolation error and over the same boundary).
+exactly a fine P1 function (a coarse solution carries over without interpolation error and
+over the same boundary).
 
 New nodes on the outer surface (midpoints of surface edges) are moved onto the envelope, the
 zero level of its signed distance, as Netgen places its own surface nodes: the refined

@@ -290,13 +290,6 @@ KEYS: tuple[Key, ...] = (
        when=_WITH_CSF, shown="`argmax_csf_*`"),
     _k("csf_max_principal_strain", "-", "the largest principal strain in the CSF (same as "
        "`max_csf_principal_strain`; null without CSF)", cases=_B),
-    _k("mesh_sequencing", "", "null, or with `--coarse-mesh`/`--coarse-tets`: "
-       "`coarse_elements`, `coarse_converged`, `coarse_newton_iterations`, "
-       "`coarse_wall_time_s`, `transfer_time_s`, `initial_residual` (scaled residual of the "
-       "carried-over state on the fine mesh), `fine_converged` (false: the fine mesh ramped "
-       "from Js = 1 instead). `wall_time_s`, `assembly_time_s`, `linear_solve_time_s` and "
-       "`linear_iterations` then include the coarse stage; `newton_iterations` and "
-       "`load_steps` are the fine mesh's", cases=_B),
     _k("extreme_sites", "", "where `max_principal_strain`, `max_radial_stretch`, "
        "`min_radial_stretch`, `max_tangential_stretch` and `max_shear_stress` are: for "
        "each, `X_mm` (reference "

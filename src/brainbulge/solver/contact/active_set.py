@@ -64,14 +64,13 @@ class ActiveSet:
             pc.add_forces(R)
             self.complementarity.append(pc.complementarity(self.c_active)[moving])
 
-    def curvatures(self, x: np.ndarray, include: bool = True) -> list[sp.csr_matrix]:
+    def curvatures(self, x: np.ndarray) -> list[sp.csr_matrix]:
         """``-P^T (A lambda grad^2 g) P`` of each contact at ``x``: the tangent's term from
-        the skull's curvature (none without ``include``; the points move to ``x`` anyway)."""
+        the skull's curvature (the points move to ``x``)."""
         out = []
         for pc in self.contacts:
             pc.update(x)
-            if include:
-                out.append(-pc.curvature())
+            out.append(-pc.curvature())
         return out
 
     def start_solve(self) -> None:

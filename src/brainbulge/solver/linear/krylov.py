@@ -26,9 +26,8 @@ GMRES iterations on the 21k-tet brain (61 with one continuous pressure), SIMPLE'
 
 The AMG hierarchies are set up once (``setup``) and reused across Newton iterations: only the
 finest level's matrix and smoother are refreshed, ``S~`` once per load step
-(:meth:`BlockKrylovSolver.new_load_step`); everything is rebuilt when a solve takes more than
-``refresh_factor`` times the iterations of the first solve after the last set-up, after a
-failed solve, or on request (``refresh()``). Every solve checks the true residual
+(:meth:`BlockKrylovSolver.new_load_step`); everything is rebuilt after a failed solve or on
+request (``refresh()``). Every solve checks the true residual
 ``|rhs - K x| / |rhs|`` and raises :class:`ConvergenceError` if it is above ``rtol``.
 
 GMRES is written here rather than taken from SciPy: SciPy's ``gmres`` preconditions from the
@@ -108,11 +107,9 @@ class BlockKrylovSolver:
         self.rtol = rtol
         self.maxiter = krylov.max_iterations
         self.restart = krylov.restart
-        self.refresh_factor = krylov.refresh_factor
         self.schur_drop = krylov.schur_drop
         self._schur_stale = True  # S~ to be rebuilt at the next solve
         self.stats = KrylovStats()
-        self._ref_iterations: int | None = None
         self._refresh_requested = False
         self._ready = False
         self._block_plans: tuple[PatternGather, ...] = ()
@@ -204,7 +201,6 @@ class BlockKrylovSolver:
         self.amg_p.setup(self.schur_matrix(a_diag, Bt, C))
         self._schur_stale = False
         self._ready = True
-        self._ref_iterations = None
         self._refresh_requested = False
         self.stats.setups += 1
         self.stats.setup_time_s += time.perf_counter() - t0
@@ -282,12 +278,6 @@ class BlockKrylovSolver:
         blocks = self._update(K)
         with serial_openblas():  # small BLAS-2 work: threads cost more than they give
             x, its, res = self._krylov(K, r, rtol, self._preconditioner(*blocks), x0)
-        if self._ref_iterations is None:
-            self._ref_iterations = max(its, 1)
-        elif its > self.refresh_factor * self._ref_iterations:
-            log.debug("Krylov iterations %d > %.2g x %d: AMG refresh", its,
-                      self.refresh_factor, self._ref_iterations)
-            self._refresh_requested = True
         log.debug("    %s: %d iterations, relative residual %.1e (%.1f s)", "gmres", its,
                   res, time.perf_counter() - t0)
         self.stats.solves += 1

@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 import ngsolve as ngs
 import numpy as np
 from netgen.libngpy._meshing import NgException
+from scipy.spatial import cKDTree
 
 from brainbulge.errors import ConvergenceError
 from brainbulge.geometry.rezone import (
@@ -43,7 +44,6 @@ from brainbulge.solver.driver import Tried, walk
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Costs, Solution, SolverOptions
 from brainbulge.solver.ramp import FULL, LoadRamp, NewtonSolver, check_feasible, costs_of, finished
-from brainbulge.solver.remesh.sequencing import carry_contact_pressures
 from brainbulge.solver.state import Snapshot
 
 log = logging.getLogger("brainbulge")
@@ -193,25 +193,6 @@ class RezoningRamp:
         return sol
 
 
-def _straighten_folded(form: MixedForm) -> None:
-    """Zero the edge bubbles of elements where ``det F <= 0`` somewhere: the old map
-    interpolated over a new element may fold it, the straight deformed triangle (netgen's
-    own, positively oriented) never does."""
-    mesh = form.mesh
-    V = form.fes.components[0]
-    uvec = form.u.vec.FV().NumPy()
-    folded_cf = ngs.IfPos(1e-6 - ngs.Det(form.F()), 1.0, 0.0)
-    for _ in range(3):
-        folded = np.asarray(ngs.Integrate(folded_cf, mesh, order=4, element_wise=True))
-        bad = np.flatnonzero(folded > 0)
-        if not len(bad):
-            return
-        log.debug("  rezoning: straightening %d folded elements", len(bad))
-        for k in bad:
-            for e in mesh[ngs.ElementId(ngs.VOL, int(k))].edges:
-                uvec[list(V.GetDofNrs(ngs.NodeId(ngs.EDGE, e.nr)))] = 0.0
-
-
 def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
     """Carry ``u``, ``p`` and the point-contact pressures from ``old`` to ``new``'s mesh:
     ``u`` at vertices from the pull-back, at P2 edge midpoints evaluated on the old mesh,
@@ -240,7 +221,6 @@ def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
         for e in range(len(ends)):
             for i, dof in enumerate(V.GetDofNrs(ngs.NodeId(ngs.EDGE, e))[: mesh.dim]):
                 uvec[dof] = bubble[e, i]
-        _straighten_folded(new)
     for k, zone in enumerate(new.pressure_zones):
         Q = new.fes.components[1 + k]
         old_p = old.gfu.components[1 + k]
@@ -256,3 +236,12 @@ def transfer_state(old: MixedForm, new: MixedForm, rz: Rezoned) -> None:
     new.set_load(old.load.Get())
     carry_contact_pressures(old, new)
 
+
+def carry_contact_pressures(old: MixedForm, new: MixedForm) -> None:
+    """Each of ``new``'s contact points takes the pressure of ``old``'s nearest one (at the
+    deformed positions of both states)."""
+    for pc_old, pc_new in zip(old.point_contacts, new.point_contacts, strict=True):
+        pc_old.update(old.gfu.vec.FV().NumPy())
+        pc_new.update(new.gfu.vec.FV().NumPy())
+        _, idx = cKDTree(pc_old.x).query(pc_new.x)
+        pc_new.lam = pc_old.lam[idx].copy()
