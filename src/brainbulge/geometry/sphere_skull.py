@@ -3,11 +3,9 @@
 The skull is a spherical shell of inner radius ``R`` and thickness ``T`` with a circular
 opening (polar half-angle ``cap_deg`` around the +z axis, and around -z too when
 ``both_poles``). As :class:`RigidSkull2D` in 2D, its cut faces have rounded edges of radius
-``rho``: the skull is the sharp shell opened by a ball of radius ``rho``, the set of points
-within ``rho`` of a *core*, the shell ``R + rho <= |x| <= R + T - rho`` at least ``rho``
-outside the opening cone. Its cut face is the cone; its inner surface is exactly ``|x| = R``
-up to ``rho`` from the cone and then turns outward on a torus of radius ``rho`` into the cut
-face. No bone lies inside the cone.
+``rho``: the skull is the set of points within ``rho`` of a *core*, the shell
+``R + rho <= |x| <= R + T - rho`` outside the opening cone, so its inner surface is exactly
+``|x| = R`` up to the opening and then turns outward on a torus of radius ``rho``.
 
 Gap ``g(x) = |x - c(x)| - rho`` with ``c(x)`` the closest core point, normal
 ``n = (x - c) / |x - c|``: positive outside the skull, negative inside.
@@ -50,44 +48,15 @@ class SphericalSkull:
         # meridian half-plane coordinates: s = distance from the axis, t = height
         s = np.hypot(x[:, 0], x[:, 1])
         t = np.abs(x[:, 2]) if self.both_poles else x[:, 2]
-        p = np.stack([s, t], axis=1)
+        theta = np.arctan2(s, t)  # polar angle from the pole
         r = np.hypot(s, t)
         tc = math.radians(self.cap_deg)
-        # the core in the half-plane: R1 <= |p| <= R2 on the far side of the line parallel to
-        # the cone's ray at distance rho, {p . m >= rho} with m the ray's outward normal
+        in_cone = theta < tc
+        # outside the cone: closest core point along the same ray; inside: on the cut ray
         e = np.array([math.sin(tc), math.cos(tc)])
-        m = np.array([math.cos(tc), -math.sin(tc)])
-
-        def corner(radius: float) -> np.ndarray:
-            return rho * m + math.sqrt(radius**2 - rho**2) * e
-
-        if tc == 0:  # no opening: the whole shell (its core the shell R1 <= |p| <= R2)
-            m = np.zeros(2)
-            rho_line = -np.inf
-        else:
-            rho_line = rho
-        inside = (r >= R1) & (r <= R2) & (p @ m >= rho_line)
-        # candidates on the core's boundary: the radial projections onto the two arcs where
-        # they lie beyond the line, and the projection onto the line's segment between them
-        best = np.full(len(s), np.inf)
-        c = np.zeros_like(p)
-        ray = p / np.maximum(r, 1e-300)[:, None]
-        for radius in (R1, R2):
-            q = radius * ray
-            ok = q @ m >= rho_line
-            dist = np.where(ok, np.linalg.norm(p - q, axis=1), np.inf)
-            take = dist < best
-            best, c = np.where(take, dist, best), np.where(take[:, None], q, c)
-        if tc > 0:
-            lo, hi = corner(R1) @ e, corner(R2) @ e
-            q = rho * m + np.clip(p @ e, lo, hi)[:, None] * e
-            dist = np.linalg.norm(p - q, axis=1)
-        else:
-            dist = np.full(len(s), np.inf)
-        take = dist < best
-        c = np.where(take[:, None], q, c)
-        c = np.where(inside[:, None], p, c)
-        cs, ct = c[:, 0], c[:, 1]
+        along = np.clip(np.where(in_cone, s * e[0] + t * e[1], r), R1, R2)
+        cs = np.where(in_cone, along * e[0], along * s / np.maximum(r, 1e-300))
+        ct = np.where(in_cone, along * e[1], along * t / np.maximum(r, 1e-300))
         # back to 3D
         ex = np.where(s > 0, x[:, 0] / np.maximum(s, 1e-300), 1.0)
         ey = np.where(s > 0, x[:, 1] / np.maximum(s, 1e-300), 0.0)

@@ -1,14 +1,12 @@
-"""The flap's opening on a spherical skull: the nominal flap opened by the cut edge's rounding.
+"""The flap's opening on the skull's inner surface is the nominal flap, whatever the rounding.
 
 A spherical skull (inner radius R = 80 mm) with a 120 mm flap: the nominal opening is the
 spherical cap inside the cutting cylinder of radius a = 60 mm, of area ``2 pi R (R -
 sqrt(R^2 - a^2))`` = 136 cm^2. The effective opening is the part of the inner surface where the
 skull with the flap lies farther than the intact skull (by more than 0.01 mm), measured by
-sampling the sphere at equal-area points (uniform in z and in longitude). The skull is the
-sharp skull opened by a ball of the edge radius ``r``: the rounding only removes bone, no bone
-lies inside the cutter, and the inner surface ends where the core (the bone ``r`` beyond it and
-``r`` outside the cutter) is ``r`` away, so the opening on it is the cap out to the cylinder
-of radius ``a + r`` (less the 0.01 mm tolerance).
+sampling the sphere at equal-area points (uniform in z and in longitude). The rounding of the
+cut edge lies in the bone, so the opening stays nominal for edge radii 2-8 mm (a rounding
+made by eroding and dilating the cutter grew it by ~50 % at 8 mm).
 """
 
 from __future__ import annotations
@@ -48,79 +46,39 @@ def equal_area_sphere_points(n: int = 400_000, seed: int = 0) -> np.ndarray:
     return np.stack([s * np.cos(lon), s * np.sin(lon), z], axis=1)
 
 
-def cap_area_mm2(radius_mm: float) -> float:
-    """Area of the sphere's cap inside the cylinder of radius ``radius_mm`` around its axis."""
-    return 2 * math.pi * R_MM * (R_MM - math.sqrt(R_MM**2 - radius_mm**2))
-
-
 @pytest.mark.parametrize("edge_radius_mm", [2.0, 4.0, 8.0])
-def test_the_opening_on_a_sphere_skull_is_the_flap_opened_by_the_rounding(
-        sphere_envelope, edge_radius_mm) -> None:
-    r = edge_radius_mm
+def test_the_opening_on_a_sphere_skull_is_the_nominal_flap(sphere_envelope,
+                                                           edge_radius_mm) -> None:
     flap = Flap("cap", (0.0, 0.0, R_MM), (0.0, 0.0, 1.0), FLAP_RADIUS_MM)
-    skull = RigidSkull(sphere_envelope, flap, r)
+    skull = RigidSkull(sphere_envelope, flap, edge_radius_mm)
     x = equal_area_sphere_points()
     phi_env, _ = skull.envelope_distance(x, gradient=False)
     phi, _ = skull.signed_distance(x, gradient=False)
     free = phi_env - phi > FREE_GAP_MM
     opening_mm2 = free.mean() * 4 * math.pi * R_MM**2
-    # the gap on the inner surface a distance s outside the cylinder is sqrt(r^2 + (r -
-    # s)^2) - r: free out to s = r - sqrt(2 r eps + eps^2)
-    eps = FREE_GAP_MM
-    reach = FLAP_RADIUS_MM + r - math.sqrt(2 * r * eps + eps**2)
-    assert opening_mm2 == pytest.approx(cap_area_mm2(reach), rel=0.02)
-    assert opening_mm2 > NOMINAL_MM2
-    # at least r outside the cutter the skull is the intact one (to round-off)
-    d_cut = flap.cutter_distance(x)[0]
-    away = d_cut >= r
-    assert np.abs(phi[away] - phi_env[away]).max() < 1e-12
-    # no bone inside the cutter, on the inner surface or deeper in the bone
-    inside = d_cut < 0
-    assert np.all(phi[inside] < 0)
-    deep = x * (1 + np.array([0.15, 0.3])[:, None, None])  # 12 and 24 mm into the bone
-    for y in deep:
-        phi_y, _ = skull.signed_distance(y, gradient=False)
-        d_y = flap.cutter_distance(y, smooth_inside=True)[0]
-        assert np.all(phi_y[d_y < 0] < 0)
-        # beyond the rounding the cut face is the cutter's surface: the bone r beyond the
-        # inner surface and inside the cutter lies -d_cut from it (d_cut smooth inside)
-        face = (d_y < 0) & (skull.envelope_distance(y, gradient=False)[0] > r + 1.0)
-        assert face.sum() > 100
-        assert -phi_y[face] == pytest.approx(-d_y[face], abs=1e-9)
-    # the analytic spherical skull with a conical cut, opened the same way: no bone inside
-    # the cone, the opening on its inner surface the cap out to the polar angle where the
-    # core's corner (R + r, r from the cone) is r away, less the tolerance's arc
-    cap = math.asin(FLAP_RADIUS_MM / R_MM)
-    sphere = SphericalSkull(R=R_MM, cap_deg=math.degrees(cap), thickness=30.0, edge_radius=r)
-    theta = np.arccos(x[:, 2] / R_MM)
-    g_sphere = sphere.gap_and_normal(x)[0]
-    assert np.all(g_sphere[theta < cap] > 0)
-    analytic = g_sphere > FREE_GAP_MM
-    widest = cap + math.asin(r / (R_MM + r)) - math.sqrt(2 * r * eps) / R_MM
-    assert theta[analytic].max() == pytest.approx(widest, abs=0.001)
-    assert analytic.mean() * 4 * math.pi * R_MM**2 > NOMINAL_MM2
+    assert opening_mm2 == pytest.approx(NOMINAL_MM2, rel=0.02)
+    # outside the cutter the skull is the intact one (to round-off)
+    outside = flap.cutter_distance(x)[0] > 0
+    assert np.abs(phi[outside] - phi_env[outside]).max() < 1e-12
+    # the analytic spherical skull, rounded the same way, has the same opening
+    sphere = SphericalSkull(R=R_MM, cap_deg=math.degrees(math.asin(FLAP_RADIUS_MM / R_MM)),
+                            thickness=30.0, edge_radius=edge_radius_mm)
+    analytic = sphere.gap_and_normal(x)[0] > FREE_GAP_MM
+    assert analytic.mean() * 4 * math.pi * R_MM**2 == pytest.approx(NOMINAL_MM2, rel=0.02)
 
 
-def test_the_rounding_turns_outward_r_outside_the_rim(sphere_envelope) -> None:
-    """On the inner surface a distance ``s`` from the cutting cylinder (negative inside) the
-    gap is ``sqrt(r^2 + (r - s)^2) - r`` up to ``s = r`` and zero beyond; the opening's
-    middle is far from any skull; the gradient is the finite differences' across the rim."""
+def test_the_rounding_curves_outward_from_the_rim(sphere_envelope) -> None:
+    """On the inner surface inside the rim the gap is the torus's, ``sqrt(r^2 + s^2) - r``
+    with ``s`` the distance into the cutter; the opening's middle is far from any skull."""
     r = 8.0
     flap = Flap("cap", (0.0, 0.0, R_MM), (0.0, 0.0, 1.0), FLAP_RADIUS_MM)
     skull = RigidSkull(sphere_envelope, flap, r)
-    s = np.array([-5.0, -2.0, -0.5, 0.0, 2.0, 5.0, 7.5, 9.0])
-    radius = FLAP_RADIUS_MM + s
+    s = np.array([0.5, 2.0, 5.0])
+    radius = FLAP_RADIUS_MM - s
     x = np.stack([radius, 0 * s, np.sqrt(R_MM**2 - radius**2)], axis=1)
     gap = -skull.signed_distance(x, gradient=False)[0]
-    assert gap == pytest.approx(np.sqrt(r**2 + np.maximum(r - s, 0) ** 2) - r, abs=0.05)
+    assert gap == pytest.approx(np.sqrt(r**2 + s**2) - r, abs=0.05)
     assert -skull.signed_distance(np.array([[0.0, 0.0, R_MM]]))[0][0] > 20.0
-    # the gradient of phi matches its finite differences on and off the inner surface
-    y = np.vstack([x, x * 1.02, x * 0.98])
-    h = 1e-5
-    fd = np.stack([(skull.signed_distance(y + h * e, gradient=False)[0]
-                    - skull.signed_distance(y - h * e, gradient=False)[0]) / (2 * h)
-                   for e in np.eye(3)], axis=1)
-    np.testing.assert_allclose(skull.signed_distance(y)[1], fd, atol=1e-6)
 
 
 def test_every_skull_of_an_envelope_shares_its_spline_and_a_pickle_makes_it_again(

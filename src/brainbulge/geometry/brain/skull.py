@@ -4,22 +4,21 @@
 Without a flap ``phi`` is the envelope's smoothed signed distance (cubic-spline interpolated on
 its grid, gradient by central differences of the same spline). With a flap the skull is removed
 inside the flap's cutting cylinder, and the cut edge is rounded with radius
-``r = edge_radius_mm`` *in the bone*, as :class:`~brainbulge.geometry.sphere_skull.SphericalSkull`
-and the 2D skull: the skull is the sharp skull opened by a ball of radius ``r``, the set of
-points within ``r`` of a core, the bone at least ``r`` beyond the inner surface and at least
-``r`` outside the cutter,
+``r = edge_radius_mm`` *in the bone*, as :class:`~brainbulge.geometry.sphere_skull.SphericalSkull`:
+the skull is the set of points within ``r`` of a core, the bone at least ``r`` beyond the
+inner surface and outside the cutter,
 
-    u = (d_skull + r, r - d_cut),   d_core = |max(u, 0)| + min(max(u), 0),   d = d_core - r,
+    u = (d_skull + r, -d_cut),   d_core = |max(u, 0)| + min(max(u), 0),   d = d_core - r,
     phi = -d
 
 with ``d_skull = -phi_env`` and ``d_cut`` the cutter's distance (negative inside; smooth
 inside, ``Flap.cutter_distance(smooth_inside=True)``: its max of the distances to the
-cutter's faces creased the skull's normal over the bisectors of the cutter's edges). Where
-``d_cut >= r`` ``d = d_skull`` exactly: the skull's inner surface ends ``r`` outside the
-nominal rim, where a torus of radius ``r`` takes over, tangent to it, and turns outward into
-the cut face; deep in the bone the cut face is the cutter's surface (``d = -d_cut``). The
-rounding only removes bone: no bone lies inside the cutter, and the opening is the nominal
-flap's at every depth, widened on the inner surface by up to ``r`` where the edge turns.
+cutter's faces creased the skull's normal over the bisectors of the cutter's edges). Outside
+the cutter ``d = d_skull`` exactly: the skull's inner surface ends at the nominal rim, where a
+torus of radius ``r`` takes over, tangent to it, and curves outward (gap ``sqrt(r^2 +
+d_cut^2) - r ~ d_cut^2 / (2 r)`` on the inner surface inside the rim); deep in the bone the
+cut face lies ``r`` inside the cylinder. The opening on the skull's inner surface is the
+nominal flap for every ``r``.
 """
 
 from __future__ import annotations
@@ -90,8 +89,8 @@ class RigidSkull:
         r = self.edge_radius_mm
         d_cut, g_cut = self.flap.cutter_distance(pts, smooth_inside=True)
         # standard distances (negative inside) of the core: the bone r beyond the inner
-        # surface, and r beyond the cutter's surface
-        u = np.stack([-phi_env + r, r - d_cut], axis=1)
+        # surface, and the cutter's outside
+        u = np.stack([-phi_env + r, -d_cut], axis=1)
         upos = np.maximum(u, 0.0)
         norm = np.linalg.norm(upos, axis=1)
         d = norm + np.minimum(u.max(axis=1), 0.0) - r
