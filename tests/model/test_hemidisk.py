@@ -130,6 +130,17 @@ def test_skull_gap_function() -> None:
     assert skull.gap_numpy(out)[0] == pytest.approx(-0.02)  # 0.02 deep in the bone
     top = np.array([[0.0, 1.3]])  # above the opening, outside the skull
     assert skull.gap_numpy(top)[0] > 0.2
+    # rounded inside the bone: no bone in the opening, the end face on the nominal ray, and
+    # the arc's last point at the nominal edge the distance to the corner's circle clear
+    rng = np.random.default_rng(1)
+    r, d = rng.uniform(0.5, 1.2, 2000), np.radians(rng.uniform(60.0, 120.0, 2000))
+    assert skull.gap_numpy(np.stack([r * np.cos(d), r * np.sin(d)], axis=1)).min() >= -1e-12
+    face = np.radians(60.0) + np.arcsin(1e-3 / 1.1)  # 1e-3 into the opening, up the face
+    assert skull.gap_numpy(np.array([[1.1 * np.cos(face), 1.1 * np.sin(face)]]))[0] == (
+        pytest.approx(1e-3, rel=1e-9))
+    edge = np.array([[np.cos(np.radians(60.0)), np.sin(np.radians(60.0))]])
+    clear = np.linalg.norm(skull.edge_centres() - edge[0], axis=1).min() - 0.05
+    assert skull.gap_numpy(edge)[0] == pytest.approx(clear, abs=1e-12) and clear > 0.35 * 0.05
     # the NGSolve form equals the NumPy form
     mesh = ngs.Mesh(ngs.unit_square.GenerateMesh(maxh=0.5))
     g = skull.gap(ngs.CF((ngs.x * 1.4 - 0.7, ngs.y * 1.4)))
