@@ -81,7 +81,6 @@ SOLVER = Path(brainbulge.solver.__file__).parent
 #: module-level numbers in ``solver/`` that are not tunables of a solve, and why
 NOT_TUNABLE = {
     ("driver.py", "REACHED"): "round-off: a parameter within 1e-12 of its target reached it",
-    ("ramp.py", "FULL"): "the same round-off guard (the driver's REACHED) for the load",
     ("mixed.py", "SPLIT_MIN_ELEMENTS"): "how the form is compiled (the same energy), not how "
                                        "it is solved",
     ("fast/hotspot.py", "HEAP"): "NGSolve's local heap in bytes: memory, not numerics",

@@ -33,7 +33,7 @@ from tqdm.auto import tqdm
 
 from brainbulge.errors import InfeasibleError
 from brainbulge.solver import restart
-from brainbulge.solver.driver import StepControl, Tried, walk
+from brainbulge.solver.driver import REACHED, StepControl, Tried, walk
 from brainbulge.solver.equations import MixedEquations
 from brainbulge.solver.fast.hotspot import HotspotRelaxation
 from brainbulge.solver.mixed import MixedForm
@@ -44,7 +44,6 @@ from brainbulge.solver.step_bounds import Slide, StepCap
 
 log = logging.getLogger("brainbulge")
 
-FULL = 1 - 1e-12  # a load at least this is full load
 
 #: the predictor: the last accepted increment of ``x`` and its load step ``dt``
 Predictor = tuple[ngs.BaseVector, float]
@@ -190,7 +189,7 @@ class LoadRamp:
             state.x.data = last.x + (dt / last_dt) * increment
             form.set_load(t)  # exact prescribed values over the predictor
         newton_tol = opt.newton.tolerance
-        tol = newton_tol if t >= FULL else max(newton_tol, opt.ramp.intermediate_tolerance)
+        tol = newton_tol if t >= REACHED else max(newton_tol, opt.ramp.intermediate_tolerance)
         res = self.solver.newton(tol)
         sol_results.append(res)
         motion = None
@@ -236,7 +235,7 @@ class LoadRamp:
             increment, last_dt = self.predictor
             restart.write(Path(opt.checkpoint), opt.checkpoint_key, self.form, self.state.x,
                           t, dt, increment, last_dt, sol)
-        if opt.stop_when is not None and t < FULL and opt.stop_when():
+        if opt.stop_when is not None and t < REACHED and opt.stop_when():
             sol.stopped_early = True
             sol.note = f"stopped at load {t:.4f} (stop_when)"
             return True

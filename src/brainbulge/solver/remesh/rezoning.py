@@ -40,10 +40,10 @@ from brainbulge.geometry.rezone import (
 )
 from brainbulge.model.problem import Problem
 from brainbulge.solver.contact.points import edge_bubble_midpoint_value
-from brainbulge.solver.driver import Tried, walk
+from brainbulge.solver.driver import REACHED, Tried, walk
 from brainbulge.solver.mixed import MixedForm
 from brainbulge.solver.options import Costs, Solution, SolverOptions
-from brainbulge.solver.ramp import FULL, LoadRamp, NewtonSolver, check_feasible, costs_of, finished
+from brainbulge.solver.ramp import LoadRamp, NewtonSolver, check_feasible, costs_of, finished
 from brainbulge.solver.state import Snapshot
 
 log = logging.getLogger("brainbulge")
@@ -137,7 +137,8 @@ class RezoningRamp:
         if failed:
             due = t > self.t_mesh  # a failure on a mesh that has deformed since
         else:
-            due = t < FULL and float(deformed_quality(form.mesh, form.u).min()) < opt.rezoning.q_min
+            due = (t < REACHED
+                   and float(deformed_quality(form.mesh, form.u).min()) < opt.rezoning.q_min)
         if not due:
             return None
         q = float(deformed_quality(form.mesh, form.u).min())
