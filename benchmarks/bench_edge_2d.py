@@ -211,7 +211,35 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
             last_set[0] = act
         its_log.append((float(form.load.Get()), f, trial, n_act, n_in, n_out))
     radius = [trust]  # the trust region's radius, in local edge lengths
-    original = newton_mod._line_search
+    newton_tol = [0.0]  # the tolerance of the Newton solve running (its Armijo test's)
+
+    def armijo(eq, state, x0, dx, dlams, norm, tol, retry, opt):
+        """The backtracking line search the product once had (``s`` halved from 1 until
+        ``|R| < (1 - 1e-4 s) |R_0|``, down to 1/1024): the comparison rows with a line
+        search."""
+        x, s = state.x, 1.0
+        while True:
+            x.data = x0.x - s * dx
+            state.set_multipliers([l0 - s * dl for l0, dl in zip(x0.lam, dlams, strict=True)])
+            trial = eq.scaled_norm(eq.residual(x))
+            if trial < (1 - 1e-4 * s) * norm or trial <= tol:
+                return s, trial
+            s *= 0.5
+            if s < 1 / 1024:
+                state.restore(x0)
+                return None, trial
+
+    def step(eq, opt, x0, limit_step, run):
+        """Newton's iteration (solver/newton.py's ``_step``: the direction, scaled by the
+        options' step limit) with the prototype's step bounds and update (:func:`capped`)."""
+        x = eq.state.x
+        dx, dlams = eq.newton_direction(x, eq.tangent(x), run.eta)
+        f = 1.0 if limit_step is None else limit_step(x, dx)
+        if f < 1:
+            dx.data = f * dx
+            dlams = [f * d for d in dlams]
+        return capped(eq, eq.state, x0, dx, dlams, run.residuals[-1], newton_tol[0], False,
+                      opt)
 
     def capped(eq, state, x0, dx, dlams, norm, tol, retry, opt):
         """Newton's line search (solver/newton.py) with the prototype's step bounds before it
@@ -272,7 +300,7 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
                 radius[0] = (min(2 * radius[0], trust_max) if trial < norm
                              else max(radius[0] / 2, trust))
             return 1.0, trial
-        out = original(eq, state, x0, dx, dlams, norm, tol, retry, opt)
+        out = armijo(eq, state, x0, dx, dlams, norm, tol, retry, opt)
         record(f * (out[0] or 0.0), out[1])
         return out
 
@@ -318,11 +346,12 @@ def run(alpha: float, beta: float, contact: str, rho: float, h: float, half: boo
         c = np.where(g1 < 0, np.maximum(glin - g1, 0.0), 0.0)
         a1[vd_b] += c[:, None] * n1
 
-    newton_mod._line_search = capped
+    newton_mod._step = step
     history: list[tuple[float, ...]] = []  # each Newton solve's scaled residuals
 
     def newton(tol: float) -> tuple[bool, int, float]:
         """One Newton solve at the form's load from its state (the slide ramp's)."""
+        newton_tol[0] = tol
         res = solver.newton(tol)
         history.append(res.residuals)
         return res.converged, res.iterations, res.norm

@@ -58,9 +58,7 @@ VARIANTS: dict[str, dict[str, object]] = {
     "no-slide": {"ramp.slide": 0.0},
     "no-predictor": {"ramp.predictor": False},
     "tight-intermediate": {"ramp.intermediate_tolerance": 1e-9},
-    "no-line-search": {"newton.line_search": False},
     "no-step-cap": {"newton.step_cap": 0.0},
-    "no-forced-active": {"newton.redirections": 0},
     "no-hotspot": {"newton.hotspot_relaxation": False},
     "no-inexact": {"linear.eta_max": 1e-10},
 }

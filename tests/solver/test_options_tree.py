@@ -128,7 +128,7 @@ def test_no_module_level_tunable_constant_in_the_solver() -> None:
 #: the solver's loops: a module and its functions or classes (every method)
 LOOPS = {
     "driver.py": ("walk", "fallback"),
-    "newton.py": ("newton", "_iterate", "_step", "_line_search"),
+    "newton.py": ("newton", "_iterate", "_step"),
     "ramp.py": ("NewtonSolver", "LoadRamp"),
     "remesh/rezoning.py": ("RezoningRamp",),
     "warm_start.py": ("solve_from_start", "warm_start_options"),
@@ -152,7 +152,7 @@ def _loop_numbers() -> list[str]:
 
 
 def test_no_bare_number_in_the_solvers_loops() -> None:
-    """Cut, growth, line-search factors: option fields, not
+    """Cut, growth, halving factors: option fields, not
     numbers in the code (0, 1, 2 are arithmetic: an index, a unit step, a halving's
     inverse)."""
     numbers = _loop_numbers()

@@ -59,7 +59,7 @@ class _Count(NewtonObserver):
 def test_newton_returns_its_result_and_the_step_limit_scales_every_update() -> None:
     """One Newton solve at half load: the result holds each iterate's residual (as the
     observer saw them), the reason and no failure site; nothing is left on the solver. A
-    step limit of 1/2 halves every update before the line search: the residual then falls
+    step limit of 1/2 halves every update before it is taken: the residual then falls
     only linearly (~1/2 per iteration), so the solve takes more iterations to the same
     tolerance and ends at the same state."""
     results, states = {}, {}

@@ -60,11 +60,10 @@ EDGE_MESH_RATIO = 3.0
 PENALTY = 3.0e4
 #: the resolved edge's step control (ramp, newton options): each load step sized so that
 #: the tissue at the edge slides about three edge elements, from the last converged state,
-#: every Newton update capped at 0.4 of the smallest edge at a vertex and taken as it is (the
-#: best of the variants measured, docs/design.md: the half domain's headline 73 -> 63 Newton
+#: every Newton update capped at 0.4 of the smallest edge at a vertex (the best of the
+#: variants measured, docs/design.md: the half domain's headline 73 -> 63 Newton
 #: iterations against two elements and 0.3; a cap of 0.5 costs more)
-RESOLVED_EDGE_STEPS = ({"slide": 3.0, "predictor": False},
-                       {"step_cap": 0.4, "line_search": False})
+RESOLVED_EDGE_STEPS = ({"slide": 3.0, "predictor": False}, {"step_cap": 0.4})
 #: the paper's zero-thickness arc, rounded, is given this thickness [R]: no bulge reaches
 #: its outer surface, and tissue pressing out past the rounding meets the end face
 PAPER_SKULL_THICKNESS = 2.0

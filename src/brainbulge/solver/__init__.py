@@ -2,7 +2,6 @@
 (:mod:`.strategy`: the load ramp, 2D rezoning, a warm start); each route is walked by the
 one continuation driver (:mod:`.driver`) over small path classes (the load ramp :mod:`.ramp`
 with its restart file :mod:`.restart`, the rezoning ramp in :mod:`.remesh`), each step Newton
-with a line search
 (:mod:`.newton`) on the discrete equations (:mod:`.equations`) of the mixed u-p form
 (:mod:`.mixed`), with the skull contact's active set (:mod:`.contact`), the linear solvers
 (:mod:`.linear`) and fast paths (:mod:`.fast`). Every tunable is a field of the options tree

@@ -145,20 +145,16 @@ class MixedEquations:
         return K
 
     def newton_direction(
-        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None, guess: np.ndarray | None = None,
-        rtol: float | None = None,
-    ) -> tuple[ngs.BaseVector, list[np.ndarray], np.ndarray | None]:
-        """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``, and
-        the linear system's solution (None with a direct solver).
+        self, x: ngs.BaseVector, K: sp.csr_matrix | None = None, rtol: float | None = None,
+    ) -> tuple[ngs.BaseVector, list[np.ndarray]]:
+        """Newton step ``(dx, dlam)`` for ``x <- x - s dx``, ``lam <- lam - s dlam``.
 
         ``self.res`` must hold ``R(x)``, as in :func:`~brainbulge.solver.newton.newton`.
         Static condensation (MINI's bubbles) extends the right-hand side before and the
         solution after the solve; the contact rows come from :meth:`ActiveSet.linearize`.
-        ``guess``: the linear system's solution of a retry at the same state (another active
-        set), an initial guess for an iterative solver solving to the
-        relative tolerance ``rtol``.
+        ``rtol``: the relative tolerance of an iterative linear solver.
         """
-        if K is None:  # a retry at the same state (new active set) reuses the tangent
+        if K is None:
             K = self.tangent(x)
         a = self.form.a
         rhs = x.CreateVector()
@@ -169,10 +165,9 @@ class MixedEquations:
         elif self.form.condense:
             rhs.data += a.harmonic_extension_trans * rhs
         b = rhs.FV().NumPy()[self.free]
-        K, b, guess = step.system(K, b, self.free, self.is_u_free, guess,
-                                  self._project_elimination)
+        K, b = step.system(K, b, self.free, self.is_u_free, self._project_elimination)
         t0 = time.perf_counter()
-        sol = self.linear.solve(K, b, rtol=rtol if self.inexact else None, x0=guess)
+        sol = self.linear.solve(K, b, rtol=rtol if self.inexact else None)
         self.t_solve += time.perf_counter() - t0
         dx_free, dlams = step.recover(sol, len(self.free))
         dx = x.CreateVector()
@@ -184,7 +179,7 @@ class MixedEquations:
         elif self.form.condense:
             dx.data += a.harmonic_extension * dx
             dx.data += a.inner_solve * rhs
-        return dx, dlams, (sol if self.inexact else None)
+        return dx, dlams
 
     def residual_site(self, x: ngs.BaseVector) -> np.ndarray | None:
         """Deformed position ``X + u`` [length] of the vertex whose free displacement DOFs

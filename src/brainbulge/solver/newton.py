@@ -1,4 +1,4 @@
-"""Newton's method with a backtracking line search on the mixed equations at one load.
+"""Newton's method on the mixed equations at one load.
 
 At a fixed load factor ``t`` the state ``x = (u, p)`` (with the contact pressures
 ``lambda``) solves ``R(x) = 0``, the stationarity of the Lagrangian of docs/model.md section 2 plus
@@ -6,13 +6,15 @@ the contact forces. Newton's iteration is::
 
     K(x_k) dx = R(x_k),        x_{k+1} = x_k - s dx,        lambda_{k+1} = lambda_k - s dlam
 
-with the contact constraints of the active set (:mod:`brainbulge.solver.contact`), and ``s``
-halved from 1 until the scaled residual :meth:`MixedEquations.scaled_norm
-<brainbulge.solver.equations.MixedEquations.scaled_norm>` falls by the Armijo factor
-``1 - 1e-4 s``. With the Krylov solver the linear solve is inexact, to the relative tolerance
-of :func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with its
-:class:`Reason`, after ``max_iterations``, at a non-finite residual, when the linear solve
-fails or when the line search finds no step (:class:`SolverOptions`).
+with the contact constraints of the active set (:mod:`brainbulge.solver.contact`), and
+``s = 1``: the whole update (scaled by an optional step limit), halved only while the
+residual is not finite. (A backtracking line search on the scaled residual
+:meth:`MixedEquations.scaled_norm <brainbulge.solver.equations.MixedEquations.scaled_norm>`
+cost iterations in every case measured: docs/design.md, "Convergence mechanisms".) With the
+Krylov solver the linear solve is inexact, to the relative tolerance of
+:func:`brainbulge.solver.inexact.forcing_term`. A solve gives up, with its :class:`Reason`,
+after ``max_iterations``, at a non-finite residual, when the linear solve fails or when no
+update gives a finite residual (:class:`SolverOptions`).
 
 :func:`newton` is a function of the equations (:class:`MixedEquations`) and their state: it
 keeps nothing between solves and returns a :class:`NewtonResult`. What is shown of a solve
@@ -36,13 +38,13 @@ from brainbulge.errors import ConvergenceError
 from brainbulge.solver.equations import MixedEquations
 from brainbulge.solver.inexact import forcing_term
 from brainbulge.solver.options import SolverOptions
-from brainbulge.solver.state import Snapshot, State
+from brainbulge.solver.state import Snapshot
 from brainbulge.solver.threads import serial_openblas
 
 log = logging.getLogger("brainbulge")
 
 #: ``limit_step(x, dx) -> f``: a factor ``f`` in (0, 1] that scales the whole update
-#: ``(dx, dlam)`` before the line search (e.g. a cap on the displacement increment)
+#: ``(dx, dlam)`` before it is taken (e.g. a cap on the displacement increment)
 StepLimit = Callable[[ngs.BaseVector, ngs.BaseVector], float]
 
 
@@ -85,7 +87,7 @@ class NewtonObserver:
         """Iterate ``it`` has scaled residual ``norm``."""
 
     def step(self, s: float, eq: MixedEquations, eta: float | None) -> None:
-        """A line-search step ``s`` was accepted (``eta``: the Krylov tolerance, or None)."""
+        """An update scaled by ``s`` was accepted (``eta``: the Krylov tolerance, or None)."""
 
 
 class NewtonLog(NewtonObserver):
@@ -112,11 +114,9 @@ class NewtonLog(NewtonObserver):
 @dataclass
 class _Inexact:
     """One solve's inexact-Newton controls: the Krylov tolerance ``eta`` (None with a
-    direct solver), the last linear solution (the guess of a retry at the same state) and
-    each iterate's scaled residual."""
+    direct solver) and each iterate's scaled residual."""
 
     eta: float | None
-    guess: np.ndarray | None = None
     residuals: list[float] = field(default_factory=list)
 
 
@@ -127,7 +127,7 @@ def newton(eq: MixedEquations, options: SolverOptions, tolerance: float | None =
     """Solve ``R(x) = 0`` at the form's load from its current state (changed in place, with
     the contact pressures) to ``tolerance`` (default: ``options.newton.tolerance``).
 
-    ``limit_step``: a factor in (0, 1] applied to each Newton update before the line search.
+    ``limit_step``: a factor in (0, 1] applied to each Newton update.
     ``observers``: default a :class:`NewtonLog`. ``relax(x, |R|) -> |R|``: a local solve
     after each accepted step (:mod:`brainbulge.solver.fast.hotspot`)."""
     tol = options.newton.tolerance if tolerance is None else tolerance
@@ -149,7 +149,6 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
              ) -> tuple[bool, int, Reason, str]:
     """:func:`newton`'s loop: (converged, iterations, reason, detail)."""
     state, nw = eq.state, opt.newton
-    eq.contact.start_solve()
     eq.linear.new_load_step()
     norm = eq.scaled_norm(eq.residual(state.x))
     for it in range(nw.max_iterations + 1):
@@ -163,11 +162,11 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
         if it == nw.max_iterations:
             return False, it, Reason.MAX_ITERATIONS, f"max_iterations = {it} reached"
         try:
-            s, trial = _step(eq, opt, state.snapshot(), norm, tol, limit_step, run)
+            s, trial = _step(eq, opt, state.snapshot(), limit_step, run)
         except ConvergenceError as exc:
             return False, it, Reason.LINEAR_FAILED, f"the linear solve failed ({exc})"
         if s is None:
-            return False, it, Reason.NO_STEP, "the line search found no step lowering |R|"
+            return False, it, Reason.NO_STEP, "no update gave a finite residual"
         for o in watch:
             o.step(s, eq, run.eta)
         # (a full step that does not halve the residual is not the Krylov tolerance's doing
@@ -180,61 +179,29 @@ def _iterate(eq: MixedEquations, opt: SolverOptions, tol: float,
         norm = trial
         if relax is not None and norm > tol:
             norm = relax(state.x, norm)
-        eq.contact.let_pulling_go()
     raise AssertionError("unreachable: the loop returns at its last iteration")
 
 
-def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, norm: float, tol: float,
-          limit_step: StepLimit | None, run: _Inexact
-          ) -> tuple[float | None, float]:
-    """One Newton iteration from ``x0`` (the state): the direction and its line search,
-    solved again (at most three times) when the line search asks for it. Returns ``(s,
-    |R(trial)|)`` of the accepted step (the state is the trial), ``s = None`` when none
-    lowers the residual (the state back at ``x0``)."""
-    state = eq.state
-    K = eq.tangent(state.x)  # shared by the retries of this iteration
-    run.guess = None  # the last linear solution, the guess of a retry
-    redirections = opt.newton.redirections
-    for attempt in range(redirections + 1):
-        dx, dlams, run.guess = eq.newton_direction(state.x, K, run.guess, run.eta)
-        if limit_step is not None:
-            f = limit_step(state.x, dx)
-            if f < 1:
-                dx.data = f * dx
-                dlams = [f * d for d in dlams]
-        s, trial = _line_search(eq, state, x0, dx, dlams, norm, tol,
-                                retry=attempt < redirections, opt=opt)
-        if s is None or s > 0:
-            return s, trial
-        state.restore(x0)  # retry the direction at x0
-        eq.residual(state.x)
-    raise AssertionError("unreachable: the last attempt accepts a step or gives up")
-
-
-def _line_search(eq: MixedEquations, state: State, x0: Snapshot, dx: ngs.BaseVector,
-                 dlams: list[np.ndarray], norm: float, tol: float, retry: bool,
-                 opt: SolverOptions) -> tuple[float | None, float]:
-    """Backtracking from ``s = 1``: the first ``s`` (halved each time) whose trial state
-    ``x0 - s dx`` has ``|R| < (1 - 1e-4 s) |R_0|`` or meets the tolerance ``tol``.
-
-    Without ``options.newton.line_search`` the update is taken as it is where its residual
-    is finite. Returns ``(s, |R(trial)|)``: ``s > 0`` accepted (the state is the trial);
-    ``s = 0`` when the direction should be solved again (``retry`` allowed): newly
-    penetrating points were forced active; ``s = None`` when no step of at least 1/1024
-    lowers the residual (the state back at ``x0``).
-    """
-    x, nw = state.x, opt.newton
+def _step(eq: MixedEquations, opt: SolverOptions, x0: Snapshot, limit_step: StepLimit | None,
+          run: _Inexact) -> tuple[float | None, float]:
+    """One Newton iteration from ``x0`` (the state): the direction, scaled by ``limit_step``,
+    taken whole and halved only while the residual is not finite (an inverted element).
+    Returns ``(s, |R(trial)|)`` of the accepted update (the state is the trial); ``s = None``
+    when no ``s >= min_line_step`` gives a finite residual (the state back at ``x0``)."""
+    state, nw = eq.state, opt.newton
+    dx, dlams = eq.newton_direction(state.x, eq.tangent(state.x), run.eta)
+    if limit_step is not None:
+        f = limit_step(state.x, dx)
+        if f < 1:
+            dx.data = f * dx
+            dlams = [f * d for d in dlams]
     s = 1.0
     while True:
-        x.data = x0.x - s * dx
+        state.x.data = x0.x - s * dx
         state.set_multipliers([l0 - s * dl for l0, dl in zip(x0.lam, dlams, strict=True)])
-        trial = eq.scaled_norm(eq.residual(x))
-        if trial < (1 - nw.armijo * s) * norm or trial <= tol:
+        trial = eq.scaled_norm(eq.residual(state.x))
+        if np.isfinite(trial):
             return s, trial
-        if not nw.line_search and np.isfinite(trial):  # the (capped) update as it is
-            return s, trial
-        if s == 1.0 and retry and eq.contact.force_penetrating():
-            return 0.0, trial
         s *= nw.backtrack
         if s < nw.min_line_step:
             state.restore(x0)

@@ -5,7 +5,7 @@ SolverOptions` holds one of each:
 
 - ``ramp`` (:class:`RampOptions`): the load ramp's steps and the driver's step control (cut,
   growth) (:mod:`brainbulge.solver.ramp`, :mod:`brainbulge.solver.driver`);
-- ``newton`` (:class:`NewtonOptions`): Newton's iterations, tolerances and line search
+- ``newton`` (:class:`NewtonOptions`): Newton's iterations, tolerances and updates
   (:mod:`brainbulge.solver.newton`);
 - ``linear`` (:class:`LinearOptions`): the linear solver and the inexact Newton's Krylov
   tolerances (:mod:`brainbulge.solver.inexact`);
@@ -161,7 +161,7 @@ class RampOptions(OptionGroup):
 
 @dataclass(frozen=True)
 class NewtonOptions(OptionGroup):
-    """Newton's method with its line search (:mod:`brainbulge.solver.newton`)."""
+    """Newton's method (:mod:`brainbulge.solver.newton`)."""
 
     max_iterations: int = option(
         20, "Newton iterations per attempt at one load (a converging attempt takes 2-10 in "
@@ -172,20 +172,12 @@ class NewtonOptions(OptionGroup):
         "round-off of the assembled residual sits near 1e-12, the summaries' numbers are "
         "converged to their printed digits", unit=RATIO, range=(1e-14, 1e-1))
     min_line_step: float = option(
-        1 / 1024, "the line search gives up below this step (ten halvings): a smaller step "
-        "changes the residual only by round-off", unit=RATIO, range=(1e-12, 1.0),
-        label="min_line_step")
+        1 / 1024, "an update whose residual is not finite (an inverted element) is halved "
+        "down to this fraction before the iteration gives up (ten halvings)", unit=RATIO,
+        range=(1e-12, 1.0), label="min_line_step")
     backtrack: float = option(
-        0.5, "the line search's step is multiplied by this after each rejected trial "
-        "(halving)", unit=RATIO, range=(0.01, 0.99))
-    armijo: float = option(
-        1e-4, "sufficient decrease: a step s is accepted when |R| falls below "
-        "(1 - armijo s) |R_0| (the textbook value, Nocedal & Wright)", unit=RATIO,
-        range=(0.0, 0.5))
-    redirections: int = option(
-        3, "times one Newton iteration's direction may be solved again with penetrating "
-        "points forced active before its line search must decide", unit=" solves",
-        range=(0, 100))
+        0.5, "an update whose residual is not finite is multiplied by this (halving)",
+        unit=RATIO, range=(0.01, 0.99))
     slow_newton_s: float = option(
         30.0, "a Newton solve running longer than this logs each iteration at INFO (else "
         "DEBUG), so a long fine-mesh solve shows its progress (negative: always)",
@@ -196,11 +188,6 @@ class NewtonOptions(OptionGroup):
         "skull edge a full update moved the tissue around the rounding by several edge "
         "elements and inverted the fillet's elements; 0.3 was the best of 0.2-1 measured",
         unit=RATIO, range=(0.0, 100.0), label="step_cap")
-    line_search: bool = option(
-        True, "backtrack on the residual norm from the (capped) update; False: take the "
-        "capped update as it is. With the penalty contact at a rounded edge the residual "
-        "rises before it falls and the line search stalled the small openings",
-        label="line_search")
     closed_form: bool = option(
         True, "the closed-form MINI residual and tangent where they apply (fast/"
         "mini_tangent, mini_plane; False: NGSolve's, the same to round-off, slower)",

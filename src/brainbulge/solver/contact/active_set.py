@@ -25,8 +25,8 @@ from brainbulge.solver.linear.sparse_reuse import PatternProject
 
 
 class ActiveSet:
-    """The contact points of a form whose DOFs are ``free`` (of ``ndof``), their active set,
-    and the points forced into it for one Newton solve.
+    """The contact points of a form whose DOFs are ``free`` (of ``ndof``) and their active
+    set.
 
     A point on a clamped edge (no free DOF) does not move: it takes no constraint.
     """
@@ -45,10 +45,6 @@ class ActiveSet:
         ]
         #: per contact, ``A C / c`` of the moving points at the last residual [volume]
         self.complementarity: list[np.ndarray] = []
-        #: per contact, inactive points that a full Newton step pushed into the skull, forced
-        #: active for the rest of the solve (left alone, such a weakly active point makes
-        #: the active set cycle and the line search halve every step)
-        self.forced = [np.zeros(pc.n_points, dtype=bool) for pc in self.contacts]
         #: per contact, the active points of the last Newton step
         self.last_active: list[np.ndarray] = []
 
@@ -73,28 +69,6 @@ class ActiveSet:
             out.append(-pc.curvature())
         return out
 
-    def start_solve(self) -> None:
-        """No point forced active at the start of a Newton solve."""
-        self.forced = [np.zeros(pc.n_points, dtype=bool) for pc in self.contacts]
-
-    def let_pulling_go(self) -> None:
-        """A forced point that pulls (``lambda < 0``) is no longer forced."""
-        for forced, pc in zip(self.forced, self.contacts, strict=True):
-            forced &= pc.lam >= 0
-
-    def force_penetrating(self) -> bool:
-        """Force into the active set the inactive points that penetrate at the current
-        (trial) state; True if there were any."""
-        any_new = False
-        tol = 1e-6 * self.h
-        for pc, forced, act, moving in zip(self.contacts, self.forced, self.last_active,
-                                           self.moving, strict=True):
-            new = ~act & (pc.g < -tol) & moving
-            if new.any():
-                forced |= new
-                any_new = True
-        return any_new
-
     def max_penetration(self) -> float:
         """Largest penetration ``max(-g, 0)`` of the moving points at the form's state
         [length] (a clamped point may overlap the skull at rest by the surface's geometric
@@ -108,8 +82,8 @@ class ActiveSet:
         (full numbering, in place)."""
         step = ContactStep()
         self.last_active = []
-        for pc, forced, moving in zip(self.contacts, self.forced, self.moving, strict=True):
-            act = (pc.active(self.c_active) | forced) & moving
+        for pc, moving in zip(self.contacts, self.moving, strict=True):
+            act = pc.active(self.c_active) & moving
             self.last_active.append(act)
             pc.add_forces(rhs, -np.where(act, 0.0, pc.lam))  # + B_I^T lam_I
             step.dlams.append(pc.lam.copy())  # inactive: to zero
@@ -130,12 +104,11 @@ class ContactStep:
     solved: list[np.ndarray] = field(default_factory=list)
 
     def system(self, K: sp.csr_matrix, b: np.ndarray, free: np.ndarray, is_u: np.ndarray,
-               guess: np.ndarray | None, project: PatternProject
-               ) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray | None]:
+               project: PatternProject) -> tuple[sp.csr_matrix, np.ndarray]:
         """The linear system of the step on the free DOFs (``K``, ``b``: the tangent and
-        right-hand side without contact), and ``guess`` made consistent with it."""
+        right-hand side without contact)."""
         if not self.rows:
-            return K, b, guess
+            return K, b
         rows = self.rows
         B_all = sp.vstack([pc.B(pts) for pc, pts, _ in rows]).tocsr()[:, free]
         on = np.concatenate([o for _, _, o in rows])
@@ -147,11 +120,7 @@ class ContactStep:
             if B.shape[0]:
                 self.elimination = NodalElimination(K, B, c, is_u, project=project)
                 K, b = self.elimination.system(b)
-                if guess is not None and len(guess) == len(b):
-                    # y has no normal part at the constrained nodes (N^T y = 0); a guess
-                    # from another active set does, which the d N N^T rows magnify
-                    guess = self.elimination.project(guess)
-            return K, b, guess
+            return K, b
         if B.shape[0]:
             K, b = augmented(K, b, B, c, is_u)
         # a row per moving point: -B_i dx = c_i if active, -s dlam_i = -s lam_i if not; the
@@ -171,7 +140,7 @@ class ContactStep:
             offsets=[(0, 0), (0, n), (n, 0), (n, n)],
             diagonal=True,
         )
-        return K, np.concatenate([b, c_all]), guess
+        return K, np.concatenate([b, c_all])
 
     def recover(self, sol: np.ndarray, n_free: int) -> tuple[np.ndarray, list[np.ndarray]]:
         """``dx`` on the free DOFs and each contact's ``dlam`` from the system's solution."""

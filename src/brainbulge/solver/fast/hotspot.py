@@ -19,7 +19,7 @@ After an accepted Newton step, with ``r_v`` the scaled residual of the DOFs at v
 - hotspot ``H``: the fewest vertices with ``sum_H r_v^2 >= share sum_v r_v^2``, if at most
   ``max_vertices``; else nothing is done (a residual spread over the body is Newton's job);
 - patch ``P``: ``H`` and ``rings`` rings of neighbours, without vertices held by the skull
-  (a contact point with a pressure, active or forced; Dirichlet DOFs stay fixed anyway);
+  (an active contact point; Dirichlet DOFs stay fixed anyway);
 - local problem: ``R_i(x_P, x_rest) = 0`` for the displacement and pressure DOFs of ``P``
   and the bubbles of the elements around ``P`` (their equations involve those elements
   only), solved by Newton with a backtracking line search, element matrices from NGSolve's
@@ -142,13 +142,12 @@ class HotspotRelaxation:
 
     # --- the local solve ------------------------------------------------------------------
     def active_points(self) -> list[np.ndarray]:
-        """Per point contact: its points that keep ``g = 0`` in a local solve (active or
-        forced, and on a vertex)."""
+        """Per point contact: its points that keep ``g = 0`` in a local solve (active and on
+        a vertex)."""
         s = self.solver
         point_vertex = (self._maps or self._build_maps())[4]
-        return [(pc.active(s.contact.c_active) | forced) & (pv >= 0)
-                for pc, pv, forced in zip(s.form.point_contacts, point_vertex,
-                                          s.contact.forced, strict=True)]
+        return [pc.active(s.contact.c_active) & (pv >= 0)
+                for pc, pv in zip(s.form.point_contacts, point_vertex, strict=True)]
 
     def local_problem(self, hot: np.ndarray, active: list[np.ndarray] | None = None
                       ) -> LocalProblem | None:
