@@ -146,15 +146,34 @@ def test_opening_is_traction_free(sliding) -> None:
     assert np.abs(_nodal_forces(form, opening)).max() < 1e-6 * on_skull
 
 
-@pytest.mark.parametrize("fixture", ["noslip", "sliding"])
-def test_symmetric_case_is_symmetric(fixture, request) -> None:
-    case, problem, form, sol = request.getfixturevalue(fixture)
+def _mirror_defect(form) -> float:
+    """The largest difference between the displacement and its mirror image at four point
+    pairs, over the largest ``|u|`` on the axis."""
     mesh = form.mesh
     umax = max(np.abs(np.asarray(form.u(mesh(0.0, y)))).max() for y in (0.5, 0.9, 0.99))
+    defect = 0.0
     for x, y in [(0.3, 0.5), (0.6, 0.2), (0.1, 0.9), (0.4, 0.85)]:
         ur = np.asarray(form.u(mesh(x, y)))
         ul = np.asarray(form.u(mesh(-x, y)))
-        np.testing.assert_allclose([ul[0], ul[1]], [-ur[0], ur[1]], atol=1e-2 * umax)
+        defect = max(defect, abs(ul[0] + ur[0]), abs(ul[1] - ur[1]))
+    return defect / umax
+
+
+def test_symmetric_case_is_symmetric(noslip) -> None:
+    """The whole hemidisk's no-slip headline on the sharp edge is its own mirror image."""
+    assert _mirror_defect(noslip[2]) < 1e-2
+
+
+def test_symmetric_sliding_case_is_symmetric_on_the_rounded_edge() -> None:
+    """Sliding on the whole hemidisk stays on the symmetric branch on the rounded edge (the
+    default). On the sharp edge the whole hemidisk's sliding solve may leave it, as
+    round-off decides (docs/known-limits.md); the half domain, the default for symmetric
+    cases, holds the mirror."""
+    case = HemidiskCase(contact="sliding", full_domain=True, mesh_size=0.1)
+    form = MixedForm(hemidisk_problem(case), element=case.element)
+    sol = NewtonSolver(form, case.solver_options()).solve()
+    assert sol.converged, sol.message
+    assert _mirror_defect(form) < 1e-3
 
 
 def test_sliding_headline_reaches_over_the_arc_end(sliding) -> None:
