@@ -56,8 +56,9 @@ from brainbulge.geometry.brain.skull import RigidSkull
 log = logging.getLogger("rim_band")
 
 #: the band's half-width in edge radii: tets within ``BAND_RHO * rho`` of the rim are refined
-#: (2 rho with a longest edge of rho / 3 gave 1.43M tets from the 111k template, within rho
-#: and rho / 2 0.70M: bisection's tets are flat, their mean edge well below the longest)
+#: (from the 111k template, grading 2: a longest edge of rho / 3 within rho gave 1.43M tets,
+#: rho / 2 within rho 0.70M; grading 0.5: rho / 2 within 2 rho 1.91M. Bisection's tets are
+#: flat, their mean edge well below the longest: rho / 2 gives a mean edge of about rho / 3)
 BAND_RHO = 1.0
 #: the band's size in edge radii: the longest edge there at most ``rho / RHO_PER_H``
 RHO_PER_H = 2.0
